@@ -1,0 +1,50 @@
+"""Atomic output: write to a temporary name in the target folder, rename on success.
+
+A render farm kills jobs at any moment; a half-written EXR that looks complete is worse than none, so every
+writer in ranad goes through :func:`atomic_output`.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import tempfile
+from typing import Iterator
+
+from .errors import RanadError
+
+
+def check_writable_target(path: str | os.PathLike) -> str:
+    """Fail early (before any work) if ``path`` cannot be created; returns it as a string."""
+    path = os.fspath(path)
+    folder = os.path.dirname(os.path.abspath(path))
+    if os.path.isdir(path):
+        raise RanadError("is a directory, expected a file name", path)
+    if not os.path.isdir(folder):
+        raise RanadError("output folder does not exist", path)
+    if not os.access(folder, os.W_OK):
+        raise RanadError("output folder is not writable", path)
+    return path
+
+
+@contextlib.contextmanager
+def atomic_output(path: str | os.PathLike, suffix: str | None = None) -> Iterator[str]:
+    """Yield a temporary path next to ``path``; rename it onto ``path`` if the block succeeds.
+
+    The temporary keeps the target's extension (``suffix``) so that libraries choosing a format by
+    extension (OpenImageIO) pick the right one. On any exception the temporary is removed.
+    """
+    path = check_writable_target(path)
+    folder = os.path.dirname(os.path.abspath(path))
+    if suffix is None:
+        suffix = os.path.splitext(path)[1]
+    fd, tmp = tempfile.mkstemp(prefix="." + os.path.basename(path) + ".", suffix=".tmp" + suffix, dir=folder)
+    os.close(fd)
+    try:
+        yield tmp
+        os.chmod(tmp, 0o644)
+        os.replace(tmp, path)
+    except BaseException:
+        with contextlib.suppress(OSError):
+            os.unlink(tmp)
+        raise
