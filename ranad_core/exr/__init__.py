@@ -1,0 +1,125 @@
+"""Deep EXR reading and writing: ``read_deep`` / ``write_deep``, plus the file-level facts ``ranad info`` shows.
+
+Two paths, one result: the fast numpy codec (:mod:`.fast`) for deep scan-line and tiled parts with
+NONE/RLE/ZIPS/ZIP, and OpenImageIO (:mod:`.oiio_io`) for anything else. OpenImageIO also validates every file
+the fast path reads, so a file OpenImageIO rejects is never silently decoded by our own code. The I/O mode is
+``auto`` (fast where possible), ``fast`` (fail instead of falling back) or ``oiio`` (always OpenImageIO).
+"""
+
+from __future__ import annotations
+
+import os
+from typing import Literal
+
+from ..deep import DeepImage
+from ..errors import RanadError
+from ..fileutil import atomic_output
+from . import fast, oiio_io
+from .header import DEEP_IMAGE_STATES, ExrLayout, parse_layout
+
+IoMode = Literal["auto", "oiio", "fast"]
+_io_mode: IoMode = "auto"
+
+__all__ = ["read_deep", "write_deep", "read_layout", "set_io_mode", "get_io_mode", "DeepImage", "ExrLayout"]
+
+
+def set_io_mode(mode: IoMode) -> None:
+    """Choose the deep I/O path process-wide (the CLI's global ``--io`` switch)."""
+    global _io_mode
+    if mode not in ("auto", "oiio", "fast"):
+        raise ValueError(f"unknown I/O mode {mode!r}")
+    _io_mode = mode
+
+
+def get_io_mode() -> IoMode:
+    return _io_mode
+
+
+def _read_bytes(path: str) -> bytes:
+    if not os.path.exists(path):
+        raise RanadError("no such file", path)
+    if os.path.isdir(path):
+        raise RanadError("is a directory, expected an EXR file", path)
+    try:
+        with open(path, "rb") as f:
+            return f.read()
+    except OSError as e:
+        raise RanadError(f"cannot read ({e.strerror})", path) from None
+
+
+def read_layout(path: str | os.PathLike) -> tuple[ExrLayout, bytes]:
+    """Parse the headers of an EXR file; returns the layout and the file's bytes."""
+    path = os.fspath(path)
+    buf = _read_bytes(path)
+    return parse_layout(buf, path), buf
+
+
+def resolve_part(layout: ExrLayout, part: int | str | None, path: str) -> int:
+    """Index of the requested part: an index, a part name, or None for the first deep part."""
+    n = len(layout.parts)
+    if part is None:
+        for i in range(n):
+            if layout.part_is_deep(i):
+                return i
+        raise RanadError("not a deep image (flat EXR); ranad needs deep EXRs", path)
+    if isinstance(part, str) and not part.lstrip("-").isdigit():
+        for i, p in enumerate(layout.parts):
+            if p.name == part:
+                return i
+        names = ", ".join(str(p.name) for p in layout.parts)
+        raise RanadError(f"no part named {part!r} (parts: {names})", path)
+    i = int(part)
+    if not 0 <= i < n:
+        raise RanadError(f"no part {i} (the file has {n})", path)
+    if not layout.part_is_deep(i):
+        raise RanadError(f"part {i} is not deep (flat EXR part)", path)
+    return i
+
+
+def read_deep(path: str | os.PathLike, part: int | str | None = None, channels: list[str] | None = None,
+              io: IoMode | None = None) -> DeepImage:
+    """Read one deep part of an EXR file into a DeepImage (bins in file order, header kept raw).
+
+    ``part``: index or name (default: the first deep part); ``channels``: read only these (all by default).
+    """
+    path = os.fspath(path)
+    mode = io or _io_mode
+    layout, buf = read_layout(path)
+    index = resolve_part(layout, part, path)
+    header = layout.parts[index]
+    oiio_io.validate(path, index, header)
+    if mode != "oiio":
+        try:
+            return fast.read_part(buf, layout, index, path, channels)
+        except fast.Unsupported as e:
+            if mode == "fast":
+                raise RanadError(f"the fast reader does not handle this file ({e}); use --io auto", path) from None
+    return oiio_io.read_part(path, index, header, channels)
+
+
+def write_deep(path: str | os.PathLike, image: DeepImage, compression: str = "zips", io: IoMode | None = None,
+               state: str | None = None) -> None:
+    """Write ``image`` as a single-part deep scan-line EXR, atomically (temporary file, then rename).
+
+    ``compression``: "zips" (default) or "none" on the fast path. ``state``: the deepImageState to record
+    ("messy", "sorted", "non_overlapping", "tidy"); by default it is measured from the bins when the input had
+    the attribute, and left out otherwise.
+    """
+    path = os.fspath(path)
+    mode = io or _io_mode
+    if compression not in fast.WRITE_COMPRESSIONS and mode != "oiio":
+        raise RanadError(f"cannot write deep compression {compression!r} (use zips or none)", path)
+    if state is not None:
+        code = {v: k for k, v in DEEP_IMAGE_STATES.items()}.get(state)
+        if code is None:
+            raise ValueError(f"unknown deepImageState {state!r}")
+    elif "deepImageState" in image.header:
+        code = fast.deep_state(image)
+    else:
+        code = None
+    with atomic_output(path) as tmp:
+        if mode == "oiio":
+            oiio_io.write(tmp, image, compression)
+        else:
+            with open(tmp, "wb") as f:
+                fast.write_part(f, image, compression, code)
