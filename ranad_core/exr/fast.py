@@ -29,6 +29,9 @@ from .header import (LINES_PER_CHUNK, VERSION_LONG_NAMES, VERSION_NONIMAGE, Attr
 _DTYPES = {"half": np.dtype("<f2"), "float": np.dtype("<f4"), "uint": np.dtype("<u4")}
 READ_COMPRESSIONS = (codec.NONE, codec.RLE, codec.ZIPS, codec.ZIP)
 WRITE_COMPRESSIONS = {"none": codec.NONE, "zips": codec.ZIPS}
+#: ZIP (16 lines per chunk) is valid EXR and read here, but OpenEXR 3.5 refuses it for deep parts, so only
+#: tests write it (to exercise multi-line chunks); users get none/zips.
+_ALL_WRITE_COMPRESSIONS = dict(WRITE_COMPRESSIONS, zip=codec.ZIP)
 
 
 class Unsupported(Exception):
@@ -206,7 +209,7 @@ def build_header(image: DeepImage, comp: int, state: int | None) -> dict[str, At
     attrs.setdefault("screenWindowWidth", Attribute("float", struct.pack("<f", 1.0)))
     attrs["type"] = encode_string("deepscanline")
     attrs["version"] = encode_int(1)
-    attrs["chunkCount"] = encode_int(image.height)
+    attrs["chunkCount"] = encode_int(-(-image.height // LINES_PER_CHUNK[comp]))
     if "name" in image.header:
         attrs["name"] = image.header["name"]
     if state is not None:
@@ -216,9 +219,9 @@ def build_header(image: DeepImage, comp: int, state: int | None) -> dict[str, At
 
 def write_part(f, image: DeepImage, compression: str = "zips", state: int | None = None) -> None:
     """Write ``image`` as a single-part deep scan-line file to the open binary file ``f``."""
-    if compression not in WRITE_COMPRESSIONS:
+    if compression not in _ALL_WRITE_COMPRESSIONS:
         raise Unsupported(f"writing compression {compression}")
-    comp = WRITE_COMPRESSIONS[compression]
+    comp = _ALL_WRITE_COMPRESSIONS[compression]
     attrs = build_header(image, comp, state)
     long_names = any(len(k) > 31 or len(a.type) > 31 for k, a in attrs.items())
     long_names |= any(len(n) > 31 for n in list(image.channels) + list(image.ids))
@@ -238,19 +241,25 @@ def write_part(f, image: DeepImage, compression: str = "zips", state: int | None
     row_start = image.offsets[:-1:w] if w > 0 else np.zeros(h, np.int64)
     row_end = image.offsets[w::w]
 
-    def encode(y: int) -> bytes:
-        s0, s1 = int(row_start[y]), int(row_end[y])
-        data = b"".join(typed[n][s0:s1].tobytes() for n in names)
-        table = cum_rows[y].tobytes()
+    lpc = LINES_PER_CHUNK[comp]
+
+    def encode(y0: int) -> bytes:
+        y1 = min(h, y0 + lpc)
+        rows = []
+        for y in range(y0, y1):
+            s0, s1 = int(row_start[y]), int(row_end[y])
+            rows.extend(typed[n][s0:s1].tobytes() for n in names)
+        data = b"".join(rows)
+        table = cum_rows[y0:y1].tobytes()
         pt, pd = codec.compress(comp, table), codec.compress(comp, data)
-        return struct.pack("<iQQQ", image.data_window[1] + y, len(pt), len(pd), len(data)) + pt + pd
+        return struct.pack("<iQQQ", image.data_window[1] + y0, len(pt), len(pd), len(data)) + pt + pd
 
     with ThreadPoolExecutor(_threads()) as pool:
-        chunks = list(pool.map(encode, range(h)))
-    pos = len(head) + 8 * h
-    table = np.empty(h, dtype="<u8")
-    for y, c in enumerate(chunks):
-        table[y] = pos
+        chunks = list(pool.map(encode, range(0, h, lpc)))
+    pos = len(head) + 8 * len(chunks)
+    table = np.empty(len(chunks), dtype="<u8")
+    for k, c in enumerate(chunks):
+        table[k] = pos
         pos += len(c)
     f.write(head)
     f.write(table.tobytes())
