@@ -15,7 +15,7 @@ from ..deep import DeepImage
 from ..errors import RanadError
 from ..fileutil import atomic_output
 from . import fast, oiio_io
-from .header import DEEP_IMAGE_STATES, ExrLayout, parse_layout
+from .header import DEEP_IMAGE_STATES, ExrLayout, parse_layout, read_file_bytes
 
 IoMode = Literal["auto", "oiio", "fast"]
 _io_mode: IoMode = "auto"
@@ -35,22 +35,10 @@ def get_io_mode() -> IoMode:
     return _io_mode
 
 
-def _read_bytes(path: str) -> bytes:
-    if not os.path.exists(path):
-        raise RanadError("no such file", path)
-    if os.path.isdir(path):
-        raise RanadError("is a directory, expected an EXR file", path)
-    try:
-        with open(path, "rb") as f:
-            return f.read()
-    except OSError as e:
-        raise RanadError(f"cannot read ({e.strerror})", path) from None
-
-
 def read_layout(path: str | os.PathLike) -> tuple[ExrLayout, bytes]:
     """Parse the headers of an EXR file; returns the layout and the file's bytes."""
     path = os.fspath(path)
-    buf = _read_bytes(path)
+    buf = read_file_bytes(path)
     return parse_layout(buf, path), buf
 
 

@@ -264,6 +264,21 @@ def write_header(attrs: dict[str, Attribute]) -> bytes:
     return b"".join(out) + b"\0"
 
 
+def read_file_bytes(path: str) -> bytes:
+    """The whole file, or a RanadError saying why it cannot be read."""
+    import os
+
+    if not os.path.exists(path):
+        raise RanadError("no such file", path)
+    if os.path.isdir(path):
+        raise RanadError("is a directory, expected an EXR file", path)
+    try:
+        with open(path, "rb") as f:
+            return f.read()
+    except OSError as e:
+        raise RanadError(f"cannot read ({e.strerror})", path) from None
+
+
 def deep_state_code(name: str) -> int:
     return {v: k for k, v in DEEP_IMAGE_STATES.items()}[name]
 

@@ -1,0 +1,64 @@
+"""``ranad info``: what is in a deep EXR (or a sequence of them)."""
+
+from __future__ import annotations
+
+import json
+
+import click
+
+from ranad_core.exr.inspect import describe
+from ranad_core.exr.sequence import expand_inputs
+
+from .main import cli
+
+
+def _size(n: int) -> str:
+    for unit in ("B", "KB", "MB", "GB"):
+        if n < 1024 or unit == "GB":
+            return f"{n:.0f} {unit}" if unit == "B" else f"{n:.1f} {unit}"
+        n /= 1024
+    return str(n)
+
+
+def _print_text(d: dict) -> None:
+    click.echo(f"{d['file']}  ({_size(d['file_size'])}{', multi-part' if d['multipart'] else ''})")
+    for p in d["parts"]:
+        name = f" '{p['name']}'" if p["name"] else ""
+        w, h = p["resolution"]
+        click.echo(f"  part {p['index']}{name}: {p['type']}, {w}x{h}, compression {p['compression']}")
+        click.echo(f"    data window {tuple(p['data_window'])}, display window {tuple(p['display_window'])}")
+        chans = ", ".join(f"{n}:{t}" for n, t in p["channels"].items())
+        click.echo(f"    channels ({len(p['channels'])}): {chans}")
+        if not p["deep"]:
+            click.echo("    flat image (not deep)")
+            continue
+        b = p["bins_per_pixel"]
+        click.echo(f"    {p['kind_guess']} (guess); {p['bins']} bins; per pixel min {b['min']}, "
+                   f"mean {b['mean']:.2f} (covered {b['mean_covered']:.2f}), max {b['max']}; "
+                   f"{100 * p['empty_pixels']:.1f}% empty")
+        click.echo(f"    volume samples: {'yes' if p['volume_samples'] else 'no'}; deepImageState: "
+                   f"{p['deepImageState'] or 'absent'} (measured: {p['measured_state']})")
+        ids = ", ".join(p["id_channels"]) or "none"
+        click.echo(f"    id channels: {ids}; id manifest: {'yes' if p['id_manifest'] else 'no'}")
+        if p["nonfinite_values"]:
+            click.echo(f"    WARNING: {p['nonfinite_values']} NaN/Inf sample values")
+
+
+@cli.command("info")
+@click.argument("inputs", nargs=-1, required=True)
+@click.option("--frames", help="Frame range for patterns, e.g. 1001-1010 or 1001-1100x2 (default: all on disk).")
+@click.option("--json", "as_json", is_flag=True, help="Print one JSON document (a list, one entry per file).")
+@click.option("--no-stats", is_flag=True, help="Headers only: skip reading the samples (fast on big files).")
+def info_cmd(inputs: tuple[str, ...], frames: str | None, as_json: bool, no_stats: bool) -> None:
+    """Describe deep EXR files: INPUTS are files or patterns (name.####.exr, name.%04d.exr, name.@@@@.exr).
+
+    Shows resolution, windows, parts, channels and their types, deep-Z vs deep-OID guess, bins per pixel
+    (min/mean/max, share of empty pixels), volume samples, deepImageState, id channels, id manifest,
+    compression and file size.
+    """
+    results = [describe(f.path, stats=not no_stats) for f in expand_inputs(list(inputs), frames)]
+    if as_json:
+        click.echo(json.dumps(results, indent=2))
+    else:
+        for d in results:
+            _print_text(d)

@@ -1,0 +1,79 @@
+"""The ``ranad`` click group: global options and the one place where errors become exit codes.
+
+A RanadError (bad input, unwritable output) is printed as one line ``ranad: error: <file>: <problem>`` and
+exits with 2; any other exception is an internal error (exit 1). Tracebacks appear only with ``--debug``.
+The handling lives in the group's ``invoke`` so click's CliRunner sees exactly what a shell user sees.
+"""
+
+from __future__ import annotations
+
+import sys
+import traceback
+
+import click
+
+from ranad_core import __version__
+from ranad_core.errors import RanadError
+
+EXIT_USER_ERROR = 2
+EXIT_INTERNAL_ERROR = 1
+
+
+class RanadGroup(click.Group):
+    def invoke(self, ctx: click.Context):
+        try:
+            return super().invoke(ctx)
+        except (click.exceptions.Exit, click.exceptions.Abort, click.ClickException):
+            raise
+        except RanadError as e:
+            if ctx.obj and ctx.obj.get("debug"):
+                traceback.print_exc()
+            click.echo(f"ranad: error: {e}", err=True)
+            ctx.exit(EXIT_USER_ERROR)
+        except KeyboardInterrupt:
+            click.echo("ranad: interrupted", err=True)
+            ctx.exit(130)
+        except Exception as e:  # noqa: BLE001 - the CLI boundary turns every failure into an exit code
+            if ctx.obj and ctx.obj.get("debug"):
+                traceback.print_exc()
+            else:
+                click.echo(f"ranad: internal error: {type(e).__name__}: {e} (rerun with --debug for details)",
+                           err=True)
+            ctx.exit(EXIT_INTERNAL_ERROR)
+
+
+@click.group(cls=RanadGroup, context_settings={"help_option_names": ["-h", "--help"]})
+@click.version_option(__version__, prog_name="ranad")
+@click.option("--io", "io_mode", type=click.Choice(["auto", "oiio", "fast"]), default="auto", show_default=True,
+              help="Deep EXR I/O path: 'fast' is ranad's vectorised codec, 'oiio' forces OpenImageIO "
+                   "(slow, for files the fast codec should not touch), 'auto' uses fast where it applies.")
+@click.option("--debug", is_flag=True, help="Show Python tracebacks on errors.")
+@click.pass_context
+def cli(ctx: click.Context, io_mode: str, debug: bool) -> None:
+    """ranad: denoise deep EXR renders (deep-Z and deep-OID) while keeping their bins.
+
+    \b
+    Commands:
+      info     what is in a deep EXR file (parts, channels, bins per pixel, ...)
+      flatten  composite deep EXRs into flat EXR/PNG/JPEG images for review
+    """
+    from ranad_core import exr
+
+    ctx.ensure_object(dict)
+    ctx.obj["debug"] = debug
+    exr.set_io_mode(io_mode)
+
+
+def _register() -> None:
+    from . import cmd_flatten, cmd_info  # noqa: F401  (commands attach themselves to `cli`)
+
+
+_register()
+
+
+def main() -> None:
+    cli(prog_name="ranad")
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

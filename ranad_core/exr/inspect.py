@@ -1,0 +1,98 @@
+"""What is in an EXR file, as plain data: the facts ``ranad info`` prints (and ``--json`` emits).
+
+Kept apart from the CLI so that pipelines can call :func:`describe` directly, and so that the deep-Z vs
+deep-OID guess lives in one place (``ranad denoise`` uses the same rule to pick its mode).
+"""
+
+from __future__ import annotations
+
+import os
+from typing import Any
+
+import numpy as np
+
+from ..deep import DeepImage
+from . import fast, read_deep, read_layout
+from .header import COMPRESSION_NAMES, DEEP_IMAGE_STATES
+
+#: id channel names preferred as "the" object id, in order; otherwise the first uint channel
+OBJECT_ID_NAMES = ("id", "Id", "ID", "objectid", "object_id", "objectId")
+
+
+def object_id_channel(image: DeepImage) -> str | None:
+    for name in OBJECT_ID_NAMES:
+        if name in image.ids:
+            return name
+    return next(iter(image.ids), None)
+
+
+def guess_kind(image: DeepImage) -> str:
+    """``"deep-OID"`` when an id channel gives every bin of a pixel a different id, else ``"deep-Z"``.
+
+    deep-OID files hold one bin per object per pixel (the paper's Sec. 2); a deep-Z file with ids has
+    pixels where one object owns several depth bins. Images without ids are deep-Z.
+    """
+    name = object_id_channel(image)
+    if name is None or image.num_bins == 0:
+        return "deep-Z"
+    pix = image.pixel_index()
+    order = np.lexsort((image.ids[name], pix))
+    p, i = pix[order], image.ids[name][order]
+    repeated = np.any((p[1:] == p[:-1]) & (i[1:] == i[:-1]))
+    return "deep-Z" if repeated else "deep-OID"
+
+
+def _deep_stats(image: DeepImage) -> dict[str, Any]:
+    counts = image.counts
+    covered = counts > 0
+    z = image.channel("Z") if "Z" in image.channels else None
+    volume = bool(z is not None and "ZBack" in image.channels and np.any(image.channel("ZBack") > z))
+    nonfinite = int(np.count_nonzero(~np.isfinite(image.values)))
+    return {
+        "bins": int(image.num_bins),
+        "bins_per_pixel": {"min": int(counts.min()), "mean": float(counts.mean()), "max": int(counts.max()),
+                           "mean_covered": float(counts[covered].mean()) if covered.any() else 0.0},
+        "empty_pixels": float(1.0 - covered.mean()),
+        "volume_samples": volume,
+        "kind_guess": guess_kind(image),
+        "id_channels": list(image.ids),
+        "nonfinite_values": nonfinite,
+        "measured_state": DEEP_IMAGE_STATES[fast.deep_state(image)],
+    }
+
+
+def describe(path: str | os.PathLike, stats: bool = True) -> dict[str, Any]:
+    """A JSON-ready description of every part of an EXR file (deep statistics for deep parts)."""
+    path = os.fspath(path)
+    layout, _ = read_layout(path)
+    out: dict[str, Any] = {"file": path, "file_size": os.path.getsize(path), "multipart": layout.multipart,
+                           "parts": []}
+    for i, part in enumerate(layout.parts):
+        dw, disp = part.data_window, part.display_window
+        deep = layout.part_is_deep(i)
+        tiled = layout.part_is_tiled(i)
+        info: dict[str, Any] = {
+            "index": i,
+            "name": part.name,
+            "type": part.type or (("deeptile" if tiled else "deepscanline") if deep
+                                  else ("tiledimage" if tiled else "scanlineimage")),
+            "deep": deep,
+            "resolution": [dw[2] - dw[0] + 1, dw[3] - dw[1] + 1],
+            "data_window": list(dw),
+            "display_window": list(disp),
+            "compression": COMPRESSION_NAMES.get(part.compression, str(part.compression)),
+            "channels": {c.name: c.type for c in sorted(part.channels, key=lambda c: c.name.encode())},
+            "deepImageState": (DEEP_IMAGE_STATES.get(part.get("deepImageState"))
+                               if "deepImageState" in part.attrs else None),
+            "id_manifest": any(k in part.attrs for k in ("idManifest", "EXRIdNames", "objectID")),
+            "attributes": sorted(part.attrs),
+        }
+        if tiled and part.tiles:
+            info["tiles"] = list(part.tiles[:2])
+        if deep and stats:
+            info.update(_deep_stats(read_deep(path, part=i)))
+        out["parts"].append(info)
+    return out
+
+
+__all__ = ["describe", "guess_kind", "object_id_channel"]
