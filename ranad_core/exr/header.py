@@ -212,7 +212,9 @@ def encode_string(s: str) -> Attribute:
 def _read_cstr(buf: bytes, pos: int, limit: int, path: str) -> tuple[str, int]:
     end = buf.find(b"\0", pos, min(len(buf), pos + limit + 1))
     if end < 0:
-        raise RanadError("corrupt header (unterminated attribute name)", path)
+        if pos + limit + 1 >= len(buf):
+            raise RanadError("truncated file (header is incomplete)", path)
+        raise RanadError("corrupt header (attribute name too long or unterminated)", path)
     return buf[pos:end].decode("utf-8", "replace"), end + 1
 
 

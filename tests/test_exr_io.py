@@ -1,0 +1,271 @@
+"""Deep EXR I/O: the fast codec against OpenImageIO on real files, round trips, and bad input."""
+
+from __future__ import annotations
+
+import glob
+import os
+import shutil
+import struct
+
+import numpy as np
+import OpenEXR
+import pytest
+
+from deep_factory import assert_same_deep, random_deep
+from ranad_core.errors import RanadError
+from ranad_core.exr import fast, read_deep, read_layout, write_deep
+from ranad_core.exr.header import parse_layout
+
+REAL = os.path.join(os.path.dirname(__file__), "..", "..", "shared", "data", "deep-real")
+REAL_FILES = sorted(f for f in glob.glob(os.path.join(REAL, "*.exr")) if "composited" not in f)
+
+
+def _deep_parts(path):
+    layout, _ = read_layout(path)
+    return [i for i in range(len(layout.parts)) if layout.part_is_deep(i)]
+
+
+def test_real_data_present():
+    assert len(REAL_FILES) >= 11, f"expected the shared deep-real files under {REAL}"
+
+
+@pytest.mark.parametrize("path", REAL_FILES, ids=os.path.basename)
+def test_real_files_bit_exact_against_openimageio(path):
+    for part in _deep_parts(path):
+        ours = read_deep(path, part=part, io="fast")
+        theirs = read_deep(path, part=part, io="oiio")
+        assert ours.num_bins > 0
+        assert_same_deep(ours, theirs)
+        assert ours.channel_types == theirs.channel_types
+        assert ours.display_window == theirs.display_window
+
+
+@pytest.mark.parametrize("path", REAL_FILES, ids=os.path.basename)
+def test_real_files_round_trip(path, tmp_path):
+    src = read_deep(path, io="fast")
+    out = tmp_path / "rt.exr"
+    write_deep(out, src)
+    assert_same_deep(read_deep(out, io="fast"), src)
+    assert_same_deep(read_deep(out, io="oiio"), src)
+    back = read_deep(out)
+    assert back.channel_types == src.channel_types
+    for name, attr in src.header.items():  # every non-structural attribute passes through byte for byte
+        if name not in ("chunkCount", "compression", "lineOrder", "deepImageState"):
+            assert back.header[name] == attr, name
+    if "deepImageState" in src.header:
+        assert back.header["deepImageState"].value() == src.header["deepImageState"].value()
+
+
+@pytest.mark.parametrize("compression", ["zips", "none"])
+def test_synthetic_round_trip_types_windows_ids(tmp_path, compression):
+    img = random_deep(width=41, height=23, origin=(-7, 5), ids=("id", "particleid"),
+                      channels=("R", "G", "B", "A", "Z", "ZBack", "mv.x"),
+                      types={"mv.x": "float"})
+    out = tmp_path / "syn.exr"
+    write_deep(out, img, compression=compression)
+    layout, _ = read_layout(out)
+    assert layout.parts[0].compression == {"zips": 2, "none": 0}[compression]
+    assert {c.name: c.type for c in layout.parts[0].channels} == img.channel_types
+    for io in ("fast", "oiio"):
+        back = read_deep(out, io=io)
+        assert_same_deep(back, img)
+        assert back.display_window == img.display_window
+
+
+def test_write_through_openimageio_reads_back(tmp_path):
+    img = random_deep(width=9, height=5, seed=3)
+    write_deep(tmp_path / "o.exr", img, io="oiio")
+    assert_same_deep(read_deep(tmp_path / "o.exr", io="fast"), img)
+
+
+def test_multi_line_zip_chunks(tmp_path):
+    # ZIP (16 lines per chunk) cannot be written by OpenEXR 3.5 for deep parts, so this checks our reader's
+    # multi-line chunk handling against our writer; tiles (below) check multi-row chunks against OpenImageIO.
+    img = random_deep(width=19, height=37, seed=4)
+    path = tmp_path / "zip.exr"
+    with open(path, "wb") as f:
+        fast.write_part(f, img, "zip")
+    buf = path.read_bytes()
+    layout = parse_layout(buf, str(path))
+    assert layout.parts[0].compression == 3 and layout.parts[0].get("chunkCount") == 3
+    assert_same_deep(fast.read_part(buf, layout, 0, str(path)), img)
+
+
+def _object_arrays(img):
+    out = {}
+    for name in list(img.channels) + list(img.ids):
+        arr = np.empty((img.height, img.width), dtype=object)
+        col = img.channel(name)
+        for p in range(img.num_pixels):
+            y, x = divmod(p, img.width)
+            v = col[img.offsets[p]:img.offsets[p + 1]]
+            if img.counts[p]:
+                arr[y, x] = v.astype(np.float16) if img.channel_types[name] == "half" else v.copy()
+        out[name] = arr
+    return out
+
+
+def test_rle_written_by_openexr(tmp_path):
+    img = random_deep(width=17, height=11, seed=5)
+    path = str(tmp_path / "rle.exr")
+    OpenEXR.File({"compression": OpenEXR.RLE_COMPRESSION, "type": OpenEXR.deepscanline},
+                 _object_arrays(img)).write(path)
+    assert read_layout(path)[0].parts[0].compression == 1
+    assert_same_deep(read_deep(path, io="fast"), img)
+    assert_same_deep(read_deep(path, io="oiio"), img)
+
+
+@pytest.mark.parametrize("tile", [(16, 8), (5, 7)])
+def test_deep_tiles_written_by_openimageio(tmp_path, tile):
+    import OpenImageIO as oiio
+
+    img = random_deep(width=37, height=21, origin=(3, 5), seed=6)
+    names = img.channels + list(img.ids)
+    spec = oiio.ImageSpec(img.width, img.height, len(names), oiio.FLOAT)
+    spec.channelnames = tuple(names)
+    spec.channelformats = tuple(oiio.TypeDesc(img.channel_types[n]) for n in names)
+    spec.x, spec.y = 3, 5
+    spec.deep = True
+    spec.tile_width, spec.tile_height = tile
+    spec.attribute("compression", "zips")
+    path = str(tmp_path / "tiled.exr")
+    out = oiio.ImageOutput.create(path)
+    assert out.open(path, spec), out.geterror()
+    dd = oiio.DeepData()
+    dd.init(img.num_pixels, len(names), spec.channelformats, spec.channelnames)
+    for p in range(img.num_pixels):
+        dd.set_samples(p, int(img.counts[p]))
+    for p in range(img.num_pixels):
+        for s in range(img.counts[p]):
+            for j in range(len(img.channels)):
+                dd.set_deep_value(p, j, s, float(img.values[img.offsets[p] + s, j]))
+            dd.set_deep_value_uint(p, len(img.channels), s, int(img.ids["id"][img.offsets[p] + s]))
+    assert out.write_deep_image(dd), out.geterror()
+    out.close()
+    layout, _ = read_layout(path)
+    assert layout.part_is_tiled(0) and layout.parts[0].tiles[:2] == tile
+    assert_same_deep(read_deep(path, io="fast"), img)
+    assert_same_deep(read_deep(path, io="oiio"), img)
+
+
+def test_multipart_by_index_and_name():
+    path = os.path.join(REAL, "Stereo_Trunks.exr")
+    right = read_deep(path, part="rgba.right")
+    assert right.data_window == read_deep(path, part=1).data_window == (0, 266, 1882, 1079)
+    assert read_deep(path).header["name"].value() == "rgba.left"
+    with pytest.raises(RanadError, match="no part named 'centre'"):
+        read_deep(path, part="centre")
+    with pytest.raises(RanadError, match="no part 5"):
+        read_deep(path, part=5)
+
+
+def test_channel_subset():
+    path = os.path.join(REAL, "openexr_test_42.deep.exr")
+    full = read_deep(path)
+    sub = read_deep(path, channels=["R", "Z", "modelid"])
+    assert sub.channels == ["R", "Z"] and list(sub.ids) == ["modelid"]
+    assert np.array_equal(sub.channel("Z"), full.channel("Z"))
+    assert np.array_equal(sub.ids["modelid"], full.ids["modelid"])
+    with pytest.raises(RanadError, match="missing channel"):
+        read_deep(path, channels=["R", "diffuse.R"])
+
+
+def test_deep_image_state_reflects_what_is_written(tmp_path):
+    src = read_deep(os.path.join(REAL, "openexr_test_42.deep.exr"))
+    assert src.header["deepImageState"].value() == 3
+    # reverse every pixel's bins: no longer sorted, so the state written must say so
+    perm = np.concatenate([np.arange(src.offsets[p + 1] - 1, src.offsets[p] - 1, -1)
+                           for p in range(src.num_pixels)]).astype(np.int64)
+    messy = src.with_values(src.values[perm])
+    messy.ids = {k: v[perm] for k, v in src.ids.items()}
+    write_deep(tmp_path / "m.exr", messy)
+    state = read_deep(tmp_path / "m.exr").header["deepImageState"].value()
+    assert state in (0, 2)  # not sorted
+    write_deep(tmp_path / "t.exr", messy, state="tidy")
+    assert read_deep(tmp_path / "t.exr").header["deepImageState"].value() == 3
+
+
+# ---- bad input ----------------------------------------------------------------------------------------
+def test_not_an_exr(tmp_path):
+    p = tmp_path / "x.exr"
+    p.write_text("hello, I am not an image")
+    with pytest.raises(RanadError, match="not an EXR file") as e:
+        read_deep(p)
+    assert str(p) in str(e.value)
+
+
+def test_flat_exr_is_refused():
+    with pytest.raises(RanadError, match="not a deep image"):
+        read_deep(os.path.join(REAL, "LowResLeftView_composited.exr"))
+
+
+def test_missing_file(tmp_path):
+    with pytest.raises(RanadError, match="no such file"):
+        read_deep(tmp_path / "nope.exr")
+
+
+@pytest.mark.parametrize("keep", [0.3, 0.9, 0.999])
+def test_truncated_file(tmp_path, keep):
+    src = os.path.join(REAL, "openexr_test_11.deep.exr")
+    data = open(src, "rb").read()
+    p = tmp_path / "cut.exr"
+    p.write_bytes(data[: int(len(data) * keep)])
+    with pytest.raises(RanadError, match="truncated|cannot be opened|corrupt"):
+        read_deep(p, io="fast")
+
+
+def test_corrupt_chunk(tmp_path):
+    src = os.path.join(REAL, "openexr_test_42.deep.exr")
+    data = bytearray(open(src, "rb").read())
+    layout = parse_layout(bytes(data), src)
+    starts = np.frombuffer(bytes(data), dtype="<u8", count=256, offset=layout.header_end)
+    chunk = int(starts[128])
+    _, packed_table, packed_data, _ = struct.unpack_from("<iQQQ", data, chunk)
+    body = chunk + 28 + packed_table
+    for k in range(8):  # scramble the zlib stream of one line's sample data
+        data[body + 4 + k] ^= 0x5A
+    p = tmp_path / "corrupt.exr"
+    p.write_bytes(bytes(data))
+    with pytest.raises(RanadError, match=r"corrupt chunk \(scan line 128"):
+        read_deep(p, io="fast")
+
+
+def test_unknown_compression_is_refused(tmp_path):
+    src = os.path.join(REAL, "openexr_test_11.deep.exr")
+    data = bytearray(open(src, "rb").read())
+    i = data.index(b"compression\0compression\0")
+    data[i + 24 + 4] = 200  # compression code 200 does not exist
+    p = tmp_path / "badcomp.exr"
+    p.write_bytes(bytes(data))
+    with pytest.raises(RanadError):
+        read_deep(p)
+
+
+def test_unwritable_output_leaves_nothing(tmp_path):
+    img = random_deep(width=4, height=3)
+    with pytest.raises(RanadError, match="output folder does not exist"):
+        write_deep(tmp_path / "missing" / "o.exr", img)
+    assert os.listdir(tmp_path) == []
+
+
+def test_failed_write_leaves_no_partial_file(tmp_path, monkeypatch):
+    img = random_deep(width=4, height=3)
+
+    def boom(*a, **k):
+        raise RuntimeError("disk full")
+
+    monkeypatch.setattr(fast, "write_part", boom)
+    with pytest.raises(RuntimeError):
+        write_deep(tmp_path / "o.exr", img)
+    assert os.listdir(tmp_path) == []
+
+
+def test_write_refuses_unknown_compression(tmp_path):
+    with pytest.raises(RanadError, match="cannot write deep compression 'piz'"):
+        write_deep(tmp_path / "o.exr", random_deep(width=4, height=3), compression="piz")
+
+
+def test_copy_of_real_file_with_unicode_name(tmp_path):
+    p = tmp_path / "plan_é.exr"
+    shutil.copy(os.path.join(REAL, "openexr_test_11.deep.exr"), p)
+    assert read_deep(p).num_bins == 6056
