@@ -139,9 +139,16 @@ def read_part(buf: bytes, layout: ExrLayout, index: int, path: str,
     n = int(offsets[-1])
 
     keep = [c for c in chans if channels is None or c.name in channels]
-    cols = {c.name: np.empty(n, dtype=_DTYPES[c.type]) for c in keep}
+    value_names = [c.name for c in keep if c.type != "uint"]
+    values = np.empty((n, len(value_names)), dtype=np.float32)
+    ids = {c.name: np.empty(n, dtype=np.uint32) for c in keep if c.type == "uint"}
+    runs = _channel_runs(chans, value_names)
     row_size = sum(c.size for c in chans)
-    for (r0, r1, c0, c1), (counts, data) in zip(geometry, decoded):
+
+    def scatter(k: int) -> None:
+        """Copy one chunk's rows into the ragged arrays: per row, one transposing copy per channel run."""
+        r0, r1, c0, c1 = geometry[k]
+        counts, data = decoded[k]
         row_totals = counts.sum(axis=1)
         if int(row_totals.sum()) * row_size != len(data):
             raise RanadError(f"corrupt chunk (rows {ymin + r0}-{ymin + r1 - 1}: sample data size mismatch)", path)
@@ -150,23 +157,45 @@ def read_part(buf: bytes, layout: ExrLayout, index: int, path: str,
             m = int(row_totals[r - r0])
             if m == 0:
                 continue
-            # each row of the chunk is contiguous in the ragged layout only for full-width rows; for tiles
-            # the row's samples start at the offset of its first pixel
+            # a row of a chunk (a full scan line, or a tile row) is contiguous in the ragged layout
             dst = int(offsets[r * width + c0])
-            for c in chans:
-                nbytes = m * c.size
-                if c.name in cols:
-                    cols[c.name][dst:dst + m] = np.frombuffer(data, dtype=_DTYPES[c.type], count=m, offset=p)
-                p += nbytes
+            for dtype, size, names, col0 in runs:
+                block = np.frombuffer(data, dtype=dtype, count=m * len(names), offset=p).reshape(len(names), m)
+                if col0 is not None:
+                    values[dst:dst + m, col0:col0 + len(names)] = block.T
+                else:
+                    for j, name in enumerate(names):
+                        if name in ids:
+                            ids[name][dst:dst + m] = block[j]
+                p += m * size * len(names)
 
-    value_names = [c.name for c in keep if c.type != "uint"]
-    values = np.empty((n, len(value_names)), dtype=np.float32)
-    for j, name in enumerate(value_names):
-        values[:, j] = cols[name]
-    ids = {c.name: cols[c.name].astype(np.uint32, copy=False) for c in keep if c.type == "uint"}
+    with ThreadPoolExecutor(_threads()) as pool:
+        list(pool.map(scatter, range(n_chunks)))
     return DeepImage(values=values, offsets=offsets, channels=value_names, ids=ids,
                      data_window=part.data_window, display_window=part.display_window,
                      channel_types={c.name: c.type for c in keep}, header=dict(part.attrs))
+
+
+def _channel_runs(chans: list[ChannelInfo], value_names: list[str]):
+    """Group the file's channels (name order) into runs that one numpy copy can move per row.
+
+    A run is consecutive channels of one pixel type that land in consecutive columns of ``values``
+    (``col0`` is the first column) or are all ids / all skipped (``col0`` None).
+    """
+    col = {name: j for j, name in enumerate(value_names)}
+    runs: list[tuple[np.dtype, int, list[str], int | None]] = []
+    for c in chans:
+        j = col.get(c.name)
+        if runs:
+            dtype, size, names, col0 = runs[-1]
+            prev_j = col.get(names[-1])
+            same_kind = dtype == _DTYPES[c.type] and ((j is None and col0 is None) or
+                                                     (j is not None and prev_j is not None and j == prev_j + 1))
+            if same_kind:
+                names.append(c.name)
+                continue
+        runs.append((_DTYPES[c.type], c.size, [c.name], j))
+    return runs
 
 
 def _chunk_count(layout: ExrLayout, i: int) -> int:
@@ -228,13 +257,10 @@ def write_part(f, image: DeepImage, compression: str = "zips", state: int | None
     flags = VERSION_NONIMAGE | (VERSION_LONG_NAMES if long_names else 0)
     head = struct.pack("<ii", MAGIC, 2 | flags) + write_header(attrs)
 
-    # every channel as contiguous bytes in file type, in name order
+    # channels in name order, grouped into runs that one transposing copy per row turns into file bytes
     names = sorted(list(image.channels) + list(image.ids), key=str.encode)
-    typed = {}
-    for name in names:
-        t = image.channel_types.get(name, "uint" if name in image.ids else "float")
-        src = image.ids[name] if name in image.ids else image.values[:, image.channel_index(name)]
-        typed[name] = np.ascontiguousarray(src.astype(_DTYPES[t]))
+    infos = [ChannelInfo(n, "uint" if n in image.ids else image.channel_types.get(n, "float")) for n in names]
+    runs = _channel_runs(infos, list(image.channels))
     w, h = image.width, image.height
     counts = image.counts.reshape(h, w)
     cum_rows = np.cumsum(counts, axis=1).astype("<i4")
@@ -248,7 +274,12 @@ def write_part(f, image: DeepImage, compression: str = "zips", state: int | None
         rows = []
         for y in range(y0, y1):
             s0, s1 = int(row_start[y]), int(row_end[y])
-            rows.extend(typed[n][s0:s1].tobytes() for n in names)
+            for dtype, _, run_names, col0 in runs:
+                if col0 is not None:
+                    block = image.values[s0:s1, col0:col0 + len(run_names)].T.astype(dtype)
+                    rows.append(block.tobytes())
+                else:
+                    rows.extend(image.ids[n][s0:s1].astype(dtype).tobytes() for n in run_names)
         data = b"".join(rows)
         table = cum_rows[y0:y1].tobytes()
         pt, pd = codec.compress(comp, table), codec.compress(comp, data)
