@@ -9,11 +9,10 @@ import click
 from ranad_core.exr.sequence import expand_inputs, output_path
 from ranad_core.fileutil import check_writable_target
 
-from .main import cli
 from .progress import progress
 
 
-@cli.command("flatten")
+@click.command("flatten")
 @click.argument("inputs", nargs=-1, required=True)
 @click.option("-o", "--output", required=True,
               help="Output file, pattern (review/beauty.####.png) or existing folder. The extension picks the "

@@ -9,7 +9,6 @@ import click
 from ranad_core.exr.inspect import describe
 from ranad_core.exr.sequence import expand_inputs
 
-from .main import cli
 
 
 def _size(n: int) -> str:
@@ -44,7 +43,7 @@ def _print_text(d: dict) -> None:
             click.echo(f"    WARNING: {p['nonfinite_values']} NaN/Inf sample values")
 
 
-@cli.command("info")
+@click.command("info")
 @click.argument("inputs", nargs=-1, required=True)
 @click.option("--frames", help="Frame range for patterns, e.g. 1001-1010 or 1001-1100x2 (default: all on disk).")
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON document (a list, one entry per file).")

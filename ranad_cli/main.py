@@ -64,11 +64,11 @@ def cli(ctx: click.Context, io_mode: str, debug: bool) -> None:
     exr.set_io_mode(io_mode)
 
 
-def _register() -> None:
-    from . import cmd_flatten, cmd_info  # noqa: F401  (commands attach themselves to `cli`)
+from .cmd_flatten import flatten_cmd  # noqa: E402  (commands import nothing from this module)
+from .cmd_info import info_cmd  # noqa: E402
 
-
-_register()
+cli.add_command(info_cmd)
+cli.add_command(flatten_cmd)
 
 
 def main() -> None:

@@ -230,20 +230,21 @@ def output_path(
     if is_pattern(out_spec):
         if frame.frame is None:
             raise RanadError(f"has no frame number to fill the output pattern {out_spec}", frame.path)
-        return format_frame(out_spec, frame.frame)
-    if os.path.isdir(out_spec) or out_spec.endswith((os.sep, "/")):
+        path = format_frame(out_spec, frame.frame)
+    elif os.path.isdir(out_spec) or out_spec.endswith((os.sep, "/")):
         if not os.path.isdir(out_spec):
             raise RanadError("output folder does not exist", out_spec)
         name = os.path.basename(frame.path)
         if ext is not None:
             name = os.path.splitext(name)[0] + (ext if ext.startswith(".") else "." + ext)
         path = os.path.join(out_spec, name)
-        if os.path.exists(frame.path) and os.path.exists(path) and os.path.samefile(path, frame.path):
-            raise RanadError("output would overwrite the input; choose another folder", path)
-        return path
-    if n_inputs > 1:
+    elif n_inputs > 1:
         raise RanadError("several inputs need an output pattern (name.####.exr) or a folder", out_spec)
-    return out_spec
+    else:
+        path = out_spec
+    if os.path.exists(frame.path) and os.path.exists(path) and os.path.samefile(path, frame.path):
+        raise RanadError("output would overwrite the input; choose another name", path)
+    return path
 
 
 def shard(items: Sequence[T], spec: str) -> list[T]:

@@ -1,0 +1,5 @@
+"""``python -m ranad_cli`` runs the ``ranad`` command."""
+
+from .main import main
+
+main()
