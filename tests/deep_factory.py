@@ -41,3 +41,29 @@ def assert_same_deep(a: DeepImage, b: DeepImage) -> None:
     assert sorted(a.ids) == sorted(b.ids)
     for name in a.ids:
         assert np.array_equal(a.ids[name], b.ids[name]), name
+
+
+def write_corrupt_chunk(src: str, dst, line: int = 128) -> None:
+    """Copy a single-part ZIPS deep file, scrambling the zlib stream of one scan line's sample data."""
+    import struct
+
+    from ranad_core.exr.header import parse_layout
+
+    data = bytearray(open(src, "rb").read())
+    layout = parse_layout(bytes(data), src)
+    n = layout.parts[0].get("chunkCount")
+    starts = np.frombuffer(bytes(data), dtype="<u8", count=n, offset=layout.header_end)
+    chunk = int(starts[line])
+    _, packed_table, _, _ = struct.unpack_from("<iQQQ", data, chunk)
+    body = chunk + 28 + packed_table
+    for k in range(8):
+        data[body + 4 + k] ^= 0x5A
+    open(dst, "wb").write(bytes(data))
+
+
+def write_bad_compression(src: str, dst, code: int = 200) -> None:
+    """Copy a file with its compression attribute set to a code that does not exist."""
+    data = bytearray(open(src, "rb").read())
+    i = data.index(b"compression\0compression\0")
+    data[i + 24 + 4] = code
+    open(dst, "wb").write(bytes(data))

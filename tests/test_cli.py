@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from deep_factory import random_deep
+from deep_factory import random_deep, write_bad_compression, write_corrupt_chunk
 from ranad_cli.main import cli
 from ranad_core.exr import read_deep, write_deep
 from ranad_core.exr.flat import read_flat
@@ -122,7 +122,8 @@ def test_flatten_offset_data_window_matches_oiio(tmp_path):
 
 
 # ---- errors --------------------------------------------------------------------------------------------
-@pytest.mark.parametrize("case", ["missing", "not_exr", "flat", "truncated", "directory"])
+@pytest.mark.parametrize("case", ["missing", "not_exr", "flat", "truncated", "corrupt", "compression",
+                                  "directory"])
 def test_bad_input_one_line_exit_2(tmp_path, case):
     if case == "missing":
         path = tmp_path / "nope.exr"
@@ -135,6 +136,12 @@ def test_bad_input_one_line_exit_2(tmp_path, case):
         path = tmp_path / "cut.exr"
         data = open(OBJECTID, "rb").read()
         path.write_bytes(data[: len(data) // 2])
+    elif case == "corrupt":
+        path = tmp_path / "corrupt.exr"
+        write_corrupt_chunk(OBJECTID, path)
+    elif case == "compression":
+        path = tmp_path / "badcomp.exr"
+        write_bad_compression(OBJECTID, path)
     else:
         path = tmp_path
     out = tmp_path / "o.png"

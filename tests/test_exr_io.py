@@ -5,13 +5,12 @@ from __future__ import annotations
 import glob
 import os
 import shutil
-import struct
 
 import numpy as np
 import OpenEXR
 import pytest
 
-from deep_factory import assert_same_deep, random_deep
+from deep_factory import assert_same_deep, random_deep, write_bad_compression, write_corrupt_chunk
 from ranad_core.errors import RanadError
 from ranad_core.exr import fast, read_deep, read_layout, write_deep
 from ranad_core.exr.header import parse_layout
@@ -215,29 +214,16 @@ def test_truncated_file(tmp_path, keep):
 
 
 def test_corrupt_chunk(tmp_path):
-    src = os.path.join(REAL, "openexr_test_42.deep.exr")
-    data = bytearray(open(src, "rb").read())
-    layout = parse_layout(bytes(data), src)
-    starts = np.frombuffer(bytes(data), dtype="<u8", count=256, offset=layout.header_end)
-    chunk = int(starts[128])
-    _, packed_table, packed_data, _ = struct.unpack_from("<iQQQ", data, chunk)
-    body = chunk + 28 + packed_table
-    for k in range(8):  # scramble the zlib stream of one line's sample data
-        data[body + 4 + k] ^= 0x5A
     p = tmp_path / "corrupt.exr"
-    p.write_bytes(bytes(data))
+    write_corrupt_chunk(os.path.join(REAL, "openexr_test_42.deep.exr"), p, line=128)
     with pytest.raises(RanadError, match=r"corrupt chunk \(scan line 128"):
         read_deep(p, io="fast")
 
 
 def test_unknown_compression_is_refused(tmp_path):
-    src = os.path.join(REAL, "openexr_test_11.deep.exr")
-    data = bytearray(open(src, "rb").read())
-    i = data.index(b"compression\0compression\0")
-    data[i + 24 + 4] = 200  # compression code 200 does not exist
     p = tmp_path / "badcomp.exr"
-    p.write_bytes(bytes(data))
-    with pytest.raises(RanadError):
+    write_bad_compression(os.path.join(REAL, "openexr_test_11.deep.exr"), p)
+    with pytest.raises(RanadError, match="compression"):
         read_deep(p)
 
 
