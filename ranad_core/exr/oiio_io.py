@@ -32,33 +32,38 @@ def open_input(path: str):
     return inp
 
 
+def _deep_part_spec(inp, path: str, part_index: int):
+    """Seek ``inp`` to the part and return its spec, or say why it is not a deep part OpenImageIO reads."""
+    if not inp.seek_subimage(part_index, 0):
+        raise RanadError(f"OpenImageIO cannot find part {part_index}", path)
+    spec = inp.spec()
+    if not spec.deep:
+        raise RanadError("not a deep image (flat EXR); ranad needs deep EXRs", path)
+    return spec
+
+
+def _formats(spec) -> list[str]:
+    return [str(t) for t in (spec.channelformats or [spec.format] * spec.nchannels)]
+
+
 def validate(path: str, part_index: int, part: PartHeader) -> None:
     """Ask OpenImageIO whether the part is a readable deep image with the channels our parser found."""
     inp = open_input(path)
     try:
-        if not inp.seek_subimage(part_index, 0):
-            raise RanadError(f"OpenImageIO cannot find part {part_index}", path)
-        spec = inp.spec()
-        if not spec.deep:
-            raise RanadError("OpenImageIO does not see a deep image in this part", path)
-        ours = {c.name: c.type for c in part.channels}
-        formats = spec.channelformats or [spec.format] * spec.nchannels
-        theirs = {n: str(t) for n, t in zip(spec.channelnames, formats)}
-        if set(ours) != set(theirs) or any(theirs[n] != _TYPES.get(t) for n, t in ours.items()):
-            raise RanadError(f"channel list disagrees with OpenImageIO ({sorted(ours)} vs {sorted(theirs)})", path)
+        spec = _deep_part_spec(inp, path, part_index)
     finally:
         inp.close()
+    ours = {c.name: c.type for c in part.channels}
+    theirs = dict(zip(spec.channelnames, _formats(spec)))
+    if set(ours) != set(theirs) or any(theirs[n] != _TYPES.get(t) for n, t in ours.items()):
+        raise RanadError(f"channel list disagrees with OpenImageIO ({sorted(ours)} vs {sorted(theirs)})", path)
 
 
 def read_part(path: str, part_index: int, part: PartHeader, channels: list[str] | None = None) -> DeepImage:
     """Read one deep part sample by sample through OpenImageIO (slow, always available)."""
     inp = open_input(path)
     try:
-        if not inp.seek_subimage(part_index, 0):
-            raise RanadError(f"OpenImageIO cannot find part {part_index}", path)
-        spec = inp.spec()
-        if not spec.deep:
-            raise RanadError("not a deep image (flat EXR)", path)
+        spec = _deep_part_spec(inp, path, part_index)
         dd = inp.read_native_deep_image(part_index, 0)
         if dd is None:
             msg = inp.geterror().strip().splitlines()
@@ -66,7 +71,7 @@ def read_part(path: str, part_index: int, part: PartHeader, channels: list[str] 
     finally:
         inp.close()
     names = list(spec.channelnames)
-    formats = [str(t) for t in (spec.channelformats or [spec.format] * spec.nchannels)]
+    formats = _formats(spec)
     order = sorted(range(len(names)), key=lambda i: names[i].encode())
     if channels is not None:
         missing = [n for n in channels if n not in names]
