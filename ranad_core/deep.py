@@ -181,6 +181,30 @@ class DeepImage:
         perm = _sort_bins(self.pixel_index(), z, zb)
         return gather_bins(self, perm, self.offsets), perm
 
+    def measured_state(self) -> str:
+        """The OpenEXR ``deepImageState`` the bins satisfy as they are, for the writer to record.
+
+        "tidy" (sorted, no overlaps, no coincident samples), "sorted", "non_overlapping" or "messy";
+        images without ``Z`` are "messy" (no depth order to speak of).
+        """
+        if "Z" not in self.channels:
+            return "messy"
+        zi, zbi = self.depth_columns()
+        z = self.values[:, zi]
+        zb = z if zbi is None else np.maximum(z, self.values[:, zbi])
+        same_pixel = np.ones(max(self.num_bins - 1, 0), dtype=bool)  # bin k+1 follows bin k in one pixel
+        starts = self.offsets[1:-1][(self.offsets[1:-1] > 0) & (self.offsets[1:-1] < self.num_bins)]
+        same_pixel[starts - 1] = False
+        ordered = np.all(~same_pixel | (z[1:] > z[:-1]) | ((z[1:] == z[:-1]) & (zb[1:] >= zb[:-1])))
+        if not ordered:  # overlaps are a property of the set of samples: look at them in depth order
+            perm = _sort_bins(self.pixel_index(), z, zb)
+            z, zb = z[perm], zb[perm]
+        coincident = np.any(same_pixel & (z[1:] == z[:-1]) & (zb[1:] == zb[:-1]))
+        disjoint = np.all(~same_pixel | (z[1:] >= zb[:-1])) and not coincident
+        if ordered and disjoint:
+            return "tidy"
+        return "sorted" if ordered else ("non_overlapping" if disjoint else "messy")
+
     # ---- tidy / flatten ---------------------------------------------------------------------------------
     def tidy(self) -> "DeepImage":
         """Make every pixel tidy (sorted and non-overlapping) as in OpenEXR's "Interpreting Deep Pixels".

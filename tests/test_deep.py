@@ -704,3 +704,17 @@ def test_chunked_work_matches_one_chunk(monkeypatch):
         assert np.array_equal(t1.offsets, t2.offsets) and np.array_equal(t1.values, t2.values)
         assert all(np.array_equal(t1.ids[k], t2.ids[k]) for k in t1.ids)
         assert np.array_equal(f1, f2) and np.array_equal(g1, g2)
+
+
+@pytest.mark.parametrize("z, zb, expected", [
+    ([1, 2, 3], [1, 2, 3], "tidy"),
+    ([1, 2, 2], [1, 2, 2], "sorted"),            # coincident points
+    ([1, 2, 3], [2.5, 2.5, 3], "sorted"),        # volume [1, 2.5] overlaps the next sample
+    ([3, 1, 2], [3, 1, 2], "non_overlapping"),   # disjoint points out of order
+    ([3, 1, 2], [3, 2.5, 2.5], "messy"),
+])
+def test_measured_state(z, zb, expected):
+    # pixel 0 holds the three samples, pixel 1 one sample that must not be compared with pixel 0's last
+    values = np.array([[0.5, a, b] for a, b in zip(z, zb)] + [[0.5, 0.0, 0.0]], dtype=np.float32)
+    img = DeepImage(values=values, offsets=[0, 3, 4], channels=["A", "Z", "ZBack"], data_window=(0, 0, 1, 0))
+    assert img.measured_state() == expected

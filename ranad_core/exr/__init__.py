@@ -15,7 +15,7 @@ from ..deep import DeepImage
 from ..errors import RanadError
 from ..fileutil import atomic_output
 from . import fast, oiio_io
-from .header import DEEP_IMAGE_STATES, ExrLayout, parse_layout, read_file_bytes
+from .header import ExrLayout, deep_state_code, parse_layout, read_file_bytes
 
 IoMode = Literal["auto", "oiio", "fast"]
 _io_mode: IoMode = "auto"
@@ -97,14 +97,9 @@ def write_deep(path: str | os.PathLike, image: DeepImage, compression: str = "zi
     mode = io or _io_mode
     if compression not in fast.WRITE_COMPRESSIONS and mode != "oiio":
         raise RanadError(f"cannot write deep compression {compression!r} (use zips or none)", path)
-    if state is not None:
-        code = {v: k for k, v in DEEP_IMAGE_STATES.items()}.get(state)
-        if code is None:
-            raise ValueError(f"unknown deepImageState {state!r}")
-    elif "deepImageState" in image.header:
-        code = fast.deep_state(image)
-    else:
-        code = None
+    if state is None and "deepImageState" in image.header:
+        state = image.measured_state()
+    code = None if state is None else deep_state_code(state)
     with atomic_output(path) as tmp:
         if mode == "oiio":
             oiio_io.write(tmp, image, compression)

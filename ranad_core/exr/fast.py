@@ -207,22 +207,6 @@ def _chunk_count(layout: ExrLayout, i: int) -> int:
 
 
 # ---- writing -----------------------------------------------------------------------------------------
-def deep_state(image: DeepImage) -> int:
-    """OpenEXR deepImageState of the bins as they are: 0 messy, 1 sorted, 2 non-overlapping, 3 tidy."""
-    if "Z" not in image.channels:
-        return 0
-    z = image.channel("Z")
-    zb = image.channel("ZBack") if "ZBack" in image.channels else z
-    same_pixel = np.ones(image.num_bins, dtype=bool)
-    same_pixel[image.offsets[:-1][image.counts > 0]] = False  # first bin of each pixel starts a new run
-    nxt = same_pixel[1:]
-    ordered = np.all((z[1:] > z[:-1]) | ((z[1:] == z[:-1]) & (zb[1:] >= zb[:-1])) | ~nxt)
-    disjoint = np.all((z[1:] >= zb[:-1]) | ~nxt) and not np.any(((z[1:] == z[:-1]) & (zb[1:] == zb[:-1])) & nxt)
-    if ordered and disjoint:
-        return 3
-    return 1 if ordered else (2 if disjoint else 0)
-
-
 def build_header(image: DeepImage, comp: int, state: int | None) -> dict[str, Attribute]:
     """The input's attributes (passed through) plus the structural ones regenerated for what we write."""
     attrs = {k: v for k, v in image.header.items() if k not in STRUCTURAL and k != "lineOrder"}

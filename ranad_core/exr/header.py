@@ -282,7 +282,11 @@ def read_file_bytes(path: str) -> bytes:
 
 
 def deep_state_code(name: str) -> int:
-    return {v: k for k, v in DEEP_IMAGE_STATES.items()}[name]
+    """The byte OpenEXR stores for a deepImageState name ("messy", "sorted", "non_overlapping", "tidy")."""
+    for code, known in DEEP_IMAGE_STATES.items():
+        if known == name:
+            return code
+    raise ValueError(f"unknown deepImageState {name!r} (use {', '.join(DEEP_IMAGE_STATES.values())})")
 
 
 def offsets_array(buf: bytes, pos: int, count: int, path: str) -> np.ndarray:

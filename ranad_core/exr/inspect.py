@@ -12,7 +12,7 @@ from typing import Any
 import numpy as np
 
 from ..deep import DeepImage
-from . import fast, read_deep, read_layout
+from . import read_deep, read_layout
 from .header import COMPRESSION_NAMES, DEEP_IMAGE_STATES
 
 #: id channel names preferred as "the" object id, in order; otherwise the first uint channel
@@ -57,7 +57,7 @@ def _deep_stats(image: DeepImage) -> dict[str, Any]:
         "kind_guess": guess_kind(image),
         "id_channels": list(image.ids),
         "nonfinite_values": nonfinite,
-        "measured_state": DEEP_IMAGE_STATES[fast.deep_state(image)],
+        "measured_state": image.measured_state(),
     }
 
 
