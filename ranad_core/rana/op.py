@@ -1,0 +1,133 @@
+"""The public RaNA op: ``rana(q, k, v, q_pixels, k_offsets, k_size, radius, bias=None)``.
+
+Registered as torch custom ops (``ranad::rana_fwd`` / ``ranad::rana_bwd`` with autograd and fake-tensor
+shapes) so it composes with autograd and torch.compile. Backends, picked by ``backend``:
+
+* ``"cpu"``: the C++/OpenMP kernels (``cuda/rana_cpu.cpp``), built on first use;
+* ``"reference"``: the plain-torch oracle (:mod:`.reference`), any device, slow and memory-hungry;
+* ``"auto"`` (default): the C++ kernels for CPU tensors when they build, the reference otherwise.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Literal, Optional
+
+import torch
+
+from .extension import cpu_extension_or_none, load_cpu_extension
+from .neighborhood import disc
+from .reference import rana_reference
+
+Backend = Literal["auto", "cpu", "reference"]
+
+
+def _disc_args(radius: float):
+    d = disc(radius)
+    dy, dx0, dx1 = d.tensors()
+    return dy, dx0, dx1, d.R
+
+
+@torch.library.custom_op("ranad::rana_fwd", mutates_args=())
+def rana_fwd(q: torch.Tensor, k: torch.Tensor, v: torch.Tensor, q_pixels: torch.Tensor, k_offsets: torch.Tensor,
+             hk: int, wk: int, radius: float, bias: Optional[torch.Tensor]) -> tuple[torch.Tensor, torch.Tensor]:
+    """Forward kernels: (out [Nq, H, dv], lse [Nq, H]); lse is -inf for queries with an empty disc."""
+    dy, dx0, dx1, R = _disc_args(radius)
+    ext = load_cpu_extension()
+    out, lse = ext.forward(q, k, v, q_pixels, k_offsets, hk, wk, dy, dx0, dx1, R, bias, 1.0 / math.sqrt(q.shape[2]))
+    return out, lse
+
+
+@rana_fwd.register_fake
+def _(q, k, v, q_pixels, k_offsets, hk, wk, radius, bias):
+    return q.new_empty((q.shape[0], q.shape[1], v.shape[2])), q.new_empty((q.shape[0], q.shape[1]))
+
+
+@torch.library.custom_op("ranad::rana_bwd", mutates_args=())
+def rana_bwd(dout: torch.Tensor, q: torch.Tensor, k: torch.Tensor, v: torch.Tensor, out: torch.Tensor,
+             lse: torch.Tensor, q_pixels: torch.Tensor, k_offsets: torch.Tensor, hk: int, wk: int, radius: float,
+             bias: Optional[torch.Tensor], need_dbias: bool
+             ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
+    """Backward kernels: (dq, dk, dv, dbias); dbias is an empty tensor when not needed."""
+    dy, dx0, dx1, R = _disc_args(radius)
+    dout = dout.contiguous()
+    delta = (dout * out).sum(-1).contiguous()
+    ext = load_cpu_extension()
+    dq, dk, dv, dbias = ext.backward(dout, q, k, v, lse, delta, q_pixels, k_offsets, hk, wk, dy, dx0, dx1, R,
+                                     bias, 1.0 / math.sqrt(q.shape[2]), need_dbias)
+    if not need_dbias:
+        dbias = q.new_empty((0,))
+    return dq, dk, dv, dbias
+
+
+@rana_bwd.register_fake
+def _(dout, q, k, v, out, lse, q_pixels, k_offsets, hk, wk, radius, bias, need_dbias):
+    side = 2 * int(math.floor(radius)) + 1
+    db = q.new_empty((q.shape[1], side, side)) if need_dbias else q.new_empty((0,))
+    return torch.empty_like(q), torch.empty_like(k), torch.empty_like(v), db
+
+
+def _setup_context(ctx, inputs, output):
+    q, k, v, q_pixels, k_offsets, hk, wk, radius, bias = inputs
+    out, lse = output
+    ctx.save_for_backward(q, k, v, out, lse, q_pixels, k_offsets, bias)
+    ctx.geometry = (hk, wk, radius)
+    ctx.has_bias = bias is not None
+
+
+def _backward(ctx, dout, dlse):
+    q, k, v, out, lse, q_pixels, k_offsets, bias = ctx.saved_tensors
+    hk, wk, radius = ctx.geometry
+    need_dbias = ctx.has_bias and ctx.needs_input_grad[8]
+    dq, dk, dv, dbias = rana_bwd(dout, q, k, v, out, lse, q_pixels, k_offsets, hk, wk, radius, bias, need_dbias)
+    return dq, dk, dv, None, None, None, None, None, (dbias if need_dbias else None)
+
+
+rana_fwd.register_autograd(_backward, setup_context=_setup_context)
+
+
+def _validate(q, k, v, q_pixels, k_offsets, k_size, radius, bias):
+    if q.dim() != 3 or k.dim() != 3 or v.dim() != 3:
+        raise ValueError("q, k, v must be [N, heads, d]")
+    if q.shape[1:] != k.shape[1:] or k.shape[:2] != v.shape[:2]:
+        raise ValueError(f"shape mismatch: q {tuple(q.shape)}, k {tuple(k.shape)}, v {tuple(v.shape)}")
+    if q_pixels.shape != (q.shape[0], 2):
+        raise ValueError(f"q_pixels must be [Nq, 2], got {tuple(q_pixels.shape)}")
+    hk, wk = int(k_size[0]), int(k_size[1])
+    if k_offsets.shape != (hk * wk + 1,) or int(k_offsets[-1]) != k.shape[0]:
+        raise ValueError("k_offsets must be [Hk*Wk+1] cumulative counts ending at the number of key bins")
+    if q_pixels.numel() and (int(q_pixels[:, 0].min()) < 0 or int(q_pixels[:, 0].max()) >= hk or
+                             int(q_pixels[:, 1].min()) < 0 or int(q_pixels[:, 1].max()) >= wk):
+        raise ValueError("query centres must lie on the key grid")
+    if bias is not None:
+        side = disc(radius).side
+        if bias.shape != (q.shape[1], side, side):
+            raise ValueError(f"bias must be [heads, {side}, {side}], got {tuple(bias.shape)}")
+    return hk, wk
+
+
+def rana(q: torch.Tensor, k: torch.Tensor, v: torch.Tensor, q_pixels: torch.Tensor, k_offsets: torch.Tensor,
+         k_size: tuple[int, int], radius: float, bias: torch.Tensor | None = None,
+         backend: Backend = "auto") -> torch.Tensor:
+    """Ragged neighbourhood attention (paper Eq. 2-4), multi-head.
+
+    q [Nq, heads, d], k [Nk, heads, d], v [Nk, heads, dv] (float32, or float64 for gradcheck);
+    q_pixels int64 [Nq, 2]: (y, x) of each query's centre on the key grid (inside it);
+    k_offsets int64 [Hk*Wk+1]: cumulative key-bin counts per key pixel, row-major; k_size (Hk, Wk);
+    radius: the L2 disc ||(dy, dx)|| <= radius; bias: optional [heads, 2R+1, 2R+1] (R = floor(radius))
+    relative-position bias added to the logits. Returns out [Nq, heads, dv] with scale 1/sqrt(d); a query
+    whose disc holds no key bins gets zeros.
+    """
+    hk, wk = _validate(q, k, v, q_pixels, k_offsets, k_size, radius, bias)
+    use_cpu = backend == "cpu" or (backend == "auto" and q.device.type == "cpu" and cpu_extension_or_none())
+    if backend not in ("auto", "cpu", "reference"):
+        raise ValueError(f"unknown RaNA backend {backend!r}")
+    if not use_cpu:
+        return rana_reference(q, k, v, q_pixels, k_offsets, (hk, wk), radius, bias)
+    q, k, v = q.contiguous(), k.contiguous(), v.contiguous()
+    q_pixels = q_pixels.to(torch.int64).contiguous()
+    k_offsets = k_offsets.to(torch.int64).contiguous()
+    if bias is not None:
+        bias = bias.to(q.dtype).contiguous()
+    out, _ = rana_fwd(q, k, v, q_pixels, k_offsets, hk, wk, float(radius), bias)
+    return out
