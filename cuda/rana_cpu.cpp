@@ -1,10 +1,11 @@
 // CPU (OpenMP) kernels of the RaNA operator and their torch bindings.
 //
-// Forward: one task per query, all heads, online softmax over the disc (rana_math.h), saving the
-// log-sum-exp. Backward (FlashAttention-2 style, probabilities recomputed from the log-sum-exp):
+// Forward: one task per query, all heads, online softmax over the disc row blocks (rana_math.h), saving
+// the log-sum-exp; keys are read transposed so each block's logits are broadcast-FMAs over consecutive keys.
+// Backward (FlashAttention-2 style, probabilities recomputed from the log-sum-exp):
 //   pass 1, one task per query: dQ;
 //   pass 2, one task per chunk of key pixels: dK and dV of every key bin from its reverse neighbourhood
-//           (queries indexed by centre pixel), plus the bias gradient of the chunk.
+//           (queries sorted by centre pixel and transposed), plus the bias gradient of the chunk.
 // Every output element is summed by one task in a fixed order and the bias gradient is reduced over a
 // fixed number of chunks in order, so results do not depend on the number of threads or the schedule.
 #include <torch/extension.h>
@@ -59,62 +60,124 @@ Problem make_problem(const torch::Tensor& q, const torch::Tensor& k, const torch
 
 int threads() { return at::get_num_threads(); }
 
+// [N, H, d] -> [N / kTile + 1, H, d, kTile] (zero padding): the tiled transposed layout of rana_math.h
+torch::Tensor transposed(const torch::Tensor& x) {
+  const int64_t n = x.size(0), tiles = n / rana::kTile + 1;
+  auto padded = torch::zeros({tiles * rana::kTile, x.size(1), x.size(2)}, x.options());
+  padded.narrow(0, 0, n).copy_(x);
+  return padded.view({tiles, rana::kTile, x.size(1), x.size(2)}).permute({0, 2, 3, 1}).contiguous();
+}
+
 template <typename T, int DK, int DV>
-void forward_impl(const Problem& pb, const T* q, const T* k, const T* v, const int64_t* qpix, const T* bias,
+void forward_impl(const Problem& pb, const T* q, const T* Kt, const T* v, const int64_t* qpix, const T* bias,
                   T scale, T* out, T* lse) {
   const int H = int(pb.H), dk = int(pb.dk), dv = int(pb.dv);
-#pragma omp parallel for schedule(dynamic, 64) num_threads(threads())
-  for (int64_t i = 0; i < pb.nq; ++i) {
-    const int64_t y = qpix[2 * i], x = qpix[2 * i + 1];
-    for (int h = 0; h < H; ++h) {
-      lse[i * H + h] = rana::forward_query_head<T, DK, DV>(q + (i * H + h) * dk, k, v, pb.grid, pb.rows, bias,
-                                                           y, x, h, H, dk, dv, scale, out + (i * H + h) * dv);
+#pragma omp parallel num_threads(threads())
+  {
+    alignas(64) T s[rana::kBuffer + rana::kLanes];
+    rana::Segment seg[rana::kMaxSegments];
+#pragma omp for schedule(dynamic, 32)
+    for (int64_t i = 0; i < pb.nq; ++i) {
+      const int64_t y = qpix[2 * i], x = qpix[2 * i + 1];
+      for (int h = 0; h < H; ++h) {
+        lse[i * H + h] = rana::forward_query_head<T, DK, DV>(q + (i * H + h) * dk, Kt, v,
+                                                             pb.grid, pb.rows, bias, y, x, h, H, dk, dv, scale,
+                                                             out + (i * H + h) * dv, s, seg);
+      }
     }
   }
 }
 
 template <typename T, int DK, int DV>
-void backward_impl(const Problem& pb, const T* q, const T* k, const T* v, const T* dout, const T* lse,
-                   const T* delta, const int64_t* qpix, const T* bias, T scale, T* dq, T* dk_out, T* dv_out,
-                   T* dbias) {
+void backward_impl(const Problem& pb, const torch::Tensor& q_t, const torch::Tensor& k_t, const torch::Tensor& v_t,
+                   const torch::Tensor& dout_t, const torch::Tensor& lse_t, const torch::Tensor& delta_t,
+                   const torch::Tensor& qpix_t, const T* bias, T scale, T* dq, T* dk_out, T* dv_out, T* dbias) {
   const int H = int(pb.H), dk = int(pb.dk), dv = int(pb.dv);
   const Grid& g = pb.grid;
+  const T* q = q_t.data_ptr<T>();
+  const T* k = k_t.data_ptr<T>();
+  const T* dout = dout_t.data_ptr<T>();
+  const T* lse = lse_t.data_ptr<T>();
+  const T* delta = delta_t.data_ptr<T>();
+  const int64_t* qpix = qpix_t.data_ptr<int64_t>();
+  const int64_t ldq = pb.nq + rana::kLanes;
+
   // pass 1: dQ, one task per query
-#pragma omp parallel for schedule(dynamic, 64) num_threads(threads())
-  for (int64_t i = 0; i < pb.nq; ++i) {
-    const int64_t y = qpix[2 * i], x = qpix[2 * i + 1];
-    for (int h = 0; h < H; ++h) {
-      rana::backward_dq_head<T, DK, DV>(q + (i * H + h) * dk, k, v, dout + (i * H + h) * dv, lse[i * H + h],
-                                        delta[i * H + h], g, pb.rows, bias, y, x, h, H, dk, dv, scale,
-                                        dq + (i * H + h) * dk);
+  {
+    auto Kt_t = transposed(k_t), Vt_t = transposed(v_t);
+    const T* Kt = Kt_t.data_ptr<T>();
+    const T* Vt = Vt_t.data_ptr<T>();
+#pragma omp parallel num_threads(threads())
+    {
+      alignas(64) T s[rana::kBuffer + rana::kLanes];
+      alignas(64) T t[rana::kBuffer + rana::kLanes];
+      rana::Segment seg[rana::kMaxSegments];
+#pragma omp for schedule(dynamic, 32)
+      for (int64_t i = 0; i < pb.nq; ++i) {
+        const int64_t y = qpix[2 * i], x = qpix[2 * i + 1];
+        for (int h = 0; h < H; ++h) {
+          rana::backward_dq_head<T, DK, DV>(q + (i * H + h) * dk, Kt, Vt, k, dout + (i * H + h) * dv,
+                                            lse[i * H + h], delta[i * H + h], g, pb.rows, bias, y, x, h, H, dk, dv,
+                                            scale, dq + (i * H + h) * dk, s, t, seg);
+        }
+      }
     }
   }
-  // queries by centre pixel (CSR, ascending query id within a pixel: a fixed summation order)
+
+  // queries sorted by centre pixel (CSR; ascending query id within a pixel: a fixed summation order)
   const int64_t npix = g.Hk * g.Wk;
-  std::vector<int64_t> q_ptr(npix + 1, 0), q_idx(pb.nq);
+  std::vector<int64_t> q_ptr(npix + 1, 0);
+  auto order_t = torch::empty({pb.nq}, qpix_t.options());
+  int64_t* order = order_t.data_ptr<int64_t>();
   for (int64_t i = 0; i < pb.nq; ++i) q_ptr[qpix[2 * i] * g.Wk + qpix[2 * i + 1] + 1]++;
   for (int64_t p = 0; p < npix; ++p) q_ptr[p + 1] += q_ptr[p];
   {
     std::vector<int64_t> fill(q_ptr.begin(), q_ptr.end() - 1);
-    for (int64_t i = 0; i < pb.nq; ++i) q_idx[fill[qpix[2 * i] * g.Wk + qpix[2 * i + 1]]++] = i;
+    for (int64_t i = 0; i < pb.nq; ++i) order[fill[qpix[2 * i] * g.Wk + qpix[2 * i + 1]]++] = i;
   }
+  auto qs_t = q_t.index_select(0, order_t), dos_t = dout_t.index_select(0, order_t);
+  auto Qt_t = transposed(qs_t), dOt_t = transposed(dos_t);
+  // [H, Nq + pad]: +inf log-sum-exp for padding and for queries with an empty disc (probability 0)
+  auto lse_s = torch::full({pb.H, ldq}, INFINITY, q_t.options());
+  auto delta_s = torch::zeros({pb.H, ldq}, q_t.options());
+  {
+    auto l = lse_t.index_select(0, order_t).t();
+    lse_s.narrow(1, 0, pb.nq).copy_(torch::where(torch::isinf(l), torch::full_like(l, INFINITY), l));
+    delta_s.narrow(1, 0, pb.nq).copy_(delta_t.index_select(0, order_t).t());
+  }
+  const T* qs = qs_t.data_ptr<T>();
+  const T* dos = dos_t.data_ptr<T>();
+  const T* Qt = Qt_t.data_ptr<T>();
+  const T* dOt = dOt_t.data_ptr<T>();
+  const T* lse_sp = lse_s.data_ptr<T>();
+  const T* delta_sp = delta_s.data_ptr<T>();
+  const T* v = v_t.data_ptr<T>();
+
   // pass 2: dK, dV per key bin; bias gradient per chunk of key pixels, reduced in chunk order
   const int side = 2 * pb.rows.R + 1;
   const int64_t bias_size = int64_t(H) * side * side;
   const int64_t nchunks = (npix + kKeyPixelsPerChunk - 1) / kKeyPixelsPerChunk;
   std::vector<T> partial(dbias ? nchunks * bias_size : 0, T(0));
-#pragma omp parallel for schedule(dynamic, 1) num_threads(threads())
-  for (int64_t c = 0; c < nchunks; ++c) {
-    T* part = dbias ? partial.data() + c * bias_size : nullptr;
-    const int64_t pe = std::min(npix, (c + 1) * kKeyPixelsPerChunk);
-    for (int64_t p = c * kKeyPixelsPerChunk; p < pe; ++p) {
-      const int64_t ky = p / g.Wk, kx = p % g.Wk;
-      for (int64_t j = g.offsets[p]; j < g.offsets[p + 1]; ++j) {
-        for (int h = 0; h < H; ++h) {
-          rana::backward_dkdv_head<T, DK, DV>(q, k + (j * H + h) * dk, v + (j * H + h) * dv, dout, lse, delta,
-                                              q_ptr.data(), q_idx.data(), g, pb.rows, bias, ky, kx, h, H, dk, dv,
-                                              scale, dk_out + (j * H + h) * dk, dv_out + (j * H + h) * dv,
-                                              part ? part + int64_t(h) * side * side : nullptr);
+#pragma omp parallel num_threads(threads())
+  {
+    alignas(64) T s[rana::kBuffer + rana::kLanes];
+    alignas(64) T t[rana::kBuffer + rana::kLanes];
+    alignas(64) T L[rana::kBuffer + rana::kLanes];
+    alignas(64) T D[rana::kBuffer + rana::kLanes];
+    rana::Segment seg[rana::kMaxSegments];
+#pragma omp for schedule(dynamic, 1)
+    for (int64_t c = 0; c < nchunks; ++c) {
+      T* part = dbias ? partial.data() + c * bias_size : nullptr;
+      const int64_t pe = std::min(npix, (c + 1) * kKeyPixelsPerChunk);
+      for (int64_t p = c * kKeyPixelsPerChunk; p < pe; ++p) {
+        const int64_t ky = p / g.Wk, kx = p % g.Wk;
+        for (int64_t j = g.offsets[p]; j < g.offsets[p + 1]; ++j) {
+          for (int h = 0; h < H; ++h) {
+            rana::backward_dkdv_head<T, DK, DV>(
+                k + (j * H + h) * dk, v + (j * H + h) * dv, Qt, dOt, qs, dos, lse_sp + h * ldq, delta_sp + h * ldq, q_ptr.data(), g, pb.rows, bias, ky, kx, h, H, dk,
+                dv, scale, dk_out + (j * H + h) * dk, dv_out + (j * H + h) * dv,
+                part ? part + int64_t(h) * side * side : nullptr, s, t, L, D, seg);
+          }
         }
       }
     }
@@ -148,7 +211,8 @@ std::vector<torch::Tensor> rana_forward(torch::Tensor q, torch::Tensor k, torch:
   AT_DISPATCH_FLOATING_TYPES(q.scalar_type(), "rana_forward", [&] {
     const scalar_t* b = bias.has_value() ? bias->data_ptr<scalar_t>() : nullptr;
     dispatch_dims(pb.dk, pb.dv, [&]<int DK, int DV>() {
-      forward_impl<scalar_t, DK, DV>(pb, q.data_ptr<scalar_t>(), k.data_ptr<scalar_t>(), v.data_ptr<scalar_t>(),
+      auto Kt = transposed(k);
+      forward_impl<scalar_t, DK, DV>(pb, q.data_ptr<scalar_t>(), Kt.data_ptr<scalar_t>(), v.data_ptr<scalar_t>(),
                                      q_pixels.data_ptr<int64_t>(), b, scalar_t(scale), out.data_ptr<scalar_t>(),
                                      lse.data_ptr<scalar_t>());
     });
@@ -172,11 +236,9 @@ std::vector<torch::Tensor> rana_backward(torch::Tensor dout, torch::Tensor q, to
   AT_DISPATCH_FLOATING_TYPES(q.scalar_type(), "rana_backward", [&] {
     const scalar_t* b = bias.has_value() ? bias->data_ptr<scalar_t>() : nullptr;
     dispatch_dims(pb.dk, pb.dv, [&]<int DK, int DV>() {
-      backward_impl<scalar_t, DK, DV>(pb, q.data_ptr<scalar_t>(), k.data_ptr<scalar_t>(), v.data_ptr<scalar_t>(),
-                                      dout.data_ptr<scalar_t>(), lse.data_ptr<scalar_t>(),
-                                      delta.data_ptr<scalar_t>(), q_pixels.data_ptr<int64_t>(), b,
-                                      scalar_t(scale), dq.data_ptr<scalar_t>(), dk.data_ptr<scalar_t>(),
-                                      dv.data_ptr<scalar_t>(), need_dbias ? dbias.data_ptr<scalar_t>() : nullptr);
+      backward_impl<scalar_t, DK, DV>(pb, q, k, v, dout, lse, delta, q_pixels, b, scalar_t(scale),
+                                      dq.data_ptr<scalar_t>(), dk.data_ptr<scalar_t>(), dv.data_ptr<scalar_t>(),
+                                      need_dbias ? dbias.data_ptr<scalar_t>() : nullptr);
     });
   });
   return {dq, dk, dv, dbias};

@@ -1,0 +1,96 @@
+"""RaNA speed: the C++ kernels against the torch reference, in the same run.
+
+Default problem (issue 3): a 512x512 layout with 0..6 bins per pixel (mean ~3), radius 3.5, 4 heads x 16
+channels. Prints forward and forward+backward time, query-key pairs per second, GFLOP/s (4*d FLOPs per
+pair per head, the usual attention count: q.k and p.v, multiply and add), peak memory of the process, and
+the speed-up over the reference on a size the reference can handle (``--ref-size``).
+Usage: python bench/rana.py [--size 512 --radius 3.5 --heads 4 --dim 16 --threads N]
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import resource
+import sys
+import time
+
+import torch
+
+sys.path.insert(0, os.path.join(os.path.dirname(__file__), ".."))
+from ranad_core.rana import rana, self_attention_layout  # noqa: E402
+from ranad_core.rana.reference import neighbour_pairs  # noqa: E402
+
+
+def problem(size: int, heads: int, dim: int, seed: int = 0):
+    g = torch.Generator().manual_seed(seed)
+    counts = torch.randint(0, 7, (size * size,), generator=g)
+    offsets = torch.cat([torch.zeros(1, dtype=torch.int64), torch.cumsum(counts, 0)])
+    n = int(offsets[-1])
+    q, k, v = (torch.randn(n, heads, dim, generator=g) for _ in range(3))
+    return offsets, q, k, v
+
+
+def pairs_of(offsets, size, radius) -> int:
+    qp, ko, ks = self_attention_layout(offsets, size, size)
+    total = 0
+    for i0 in range(0, qp.shape[0], 1 << 16):
+        total += neighbour_pairs(qp[i0:i0 + (1 << 16)], ko, ks, radius)[0].numel()
+    return total
+
+
+def best_of(fn, repeats: int) -> float:
+    times = []
+    for _ in range(repeats):
+        t = time.perf_counter()
+        fn()
+        times.append(time.perf_counter() - t)
+    return min(times)
+
+
+def run(size, radius, heads, dim, backend, repeats):
+    offsets, q, k, v = problem(size, heads, dim)
+    qp, ko, ks = self_attention_layout(offsets, size, size)
+    bias = torch.zeros(heads, 2 * int(radius) + 1, 2 * int(radius) + 1)
+    fwd = best_of(lambda: rana(q, k, v, qp, ko, ks, radius, bias, backend=backend), repeats)
+    qg, kg, vg, bg = (t.clone().requires_grad_(True) for t in (q, k, v, bias))
+
+    def fwd_bwd():
+        out = rana(qg, kg, vg, qp, ko, ks, radius, bg, backend=backend)
+        out.backward(torch.ones_like(out))
+
+    both = best_of(fwd_bwd, repeats)
+    return fwd, both, pairs_of(offsets, size, radius), int(offsets[-1])
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--size", type=int, default=512)
+    ap.add_argument("--ref-size", type=int, default=96)
+    ap.add_argument("--radius", type=float, default=3.5)
+    ap.add_argument("--heads", type=int, default=4)
+    ap.add_argument("--dim", type=int, default=16)
+    ap.add_argument("--threads", type=int, default=torch.get_num_threads())
+    ap.add_argument("--repeats", type=int, default=3)
+    args = ap.parse_args()
+    torch.set_num_threads(args.threads)
+    flop = 4 * args.dim * args.heads
+    print(f"RaNA bench: radius {args.radius}, {args.heads} heads x {args.dim}, {args.threads} threads, "
+          f"torch {torch.__version__}")
+    rows = []
+    for label, size, backend in (("C++ kernels", args.size, "cpu"), ("C++ kernels", args.ref_size, "cpu"),
+                                 ("reference", args.ref_size, "reference")):
+        fwd, both, pairs, bins = run(size, args.radius, args.heads, args.dim, backend, args.repeats)
+        rows.append((label, size, fwd, both, pairs))
+        print(f"{label:12s} {size}x{size} ({bins} bins, {pairs / 1e6:.1f} M pairs): "
+              f"forward {fwd * 1e3:8.1f} ms = {pairs / fwd / 1e6:6.1f} M pairs/s, {pairs * flop / fwd / 1e9:5.1f} "
+              f"GFLOP/s | forward+backward {both * 1e3:8.1f} ms = {pairs / both / 1e6:6.1f} M pairs/s")
+    _, _, f_small, b_small, _ = rows[1]
+    _, _, f_ref, b_ref, _ = rows[2]
+    print(f"speed-up over the reference at {args.ref_size}x{args.ref_size}: forward {f_ref / f_small:.0f}x, "
+          f"forward+backward {b_ref / b_small:.0f}x")
+    print(f"peak resident memory of this process: {resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024:.0f} MB")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,198 @@
+"""RaNA: the C++ kernels against the torch reference (the oracle), gradients, layouts, determinism."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+import torch
+
+from ranad_core.rana import (bin_pixels, concat_frames, disc, downsample_layout, rana, rana_reference,
+                             self_attention_layout)
+from ranad_core.rana import extension
+from ranad_core.rana.op import rana_fwd
+
+
+def ragged_offsets(h, w, max_bins=4, seed=0, heavy=True):
+    g = torch.Generator().manual_seed(seed)
+    counts = torch.randint(0, max_bins + 1, (h * w,), generator=g)
+    counts[0] = 0  # an empty corner pixel
+    if heavy:
+        counts[min(h * w - 1, w + 1)] = 11  # a pixel with 10+ bins
+    return torch.cat([torch.zeros(1, dtype=torch.int64), torch.cumsum(counts, 0)])
+
+
+def qkv(nq, nk, heads, d, dv, dtype, seed=1):
+    g = torch.Generator().manual_seed(seed)
+    mk = lambda n, c: torch.randn(n, heads, c, generator=g, dtype=dtype)  # noqa: E731
+    return mk(nq, d), mk(nk, d), mk(nk, dv)
+
+
+def layouts(h=7, w=6, seed=0):
+    """(name, q_pixels, k_offsets, k_size, nq): every way the model uses RaNA, on one small ragged grid."""
+    offs = ragged_offsets(h, w, seed=seed)
+    out = []
+    qp, ko, ks = self_attention_layout(offs, h, w)
+    out.append(("self", qp, ko, ks))
+    keep = torch.arange(int(offs[-1])) % 3 != 1  # deterministic bin dropout
+    _, q_sparse, sparse_offs = downsample_layout(offs, w, keep)
+    out.append(("down", q_sparse, offs, (h, w)))  # sparse queries over all bins
+    out.append(("up", bin_pixels(offs, w), sparse_offs, (h, w)))  # all bins over the sparse layout
+    frames = [ragged_offsets(h, w, seed=seed + t, heavy=False) for t in range(3)]
+    t_offs, _, _ = concat_frames(frames)
+    out.append(("temporal", bin_pixels(frames[1], w), t_offs, (h, w)))  # centre frame over 3 frames
+    return out
+
+
+CASES = [(name, radius, with_bias) for name in ("self", "down", "up", "temporal")
+         for radius, with_bias in ((0.0, False), (1.0, True), (2.5, True), (2.5, False))]
+
+
+def _inputs(name, radius, with_bias, dtype, d=4, dv=3, heads=2):
+    lay = {n: (qp, ko, ks) for n, qp, ko, ks in layouts()}[name]
+    qp, ko, ks = lay
+    q, k, v = qkv(qp.shape[0], int(ko[-1]), heads, d, dv, dtype)
+    side = disc(radius).side
+    bias = torch.randn(heads, side, side, dtype=dtype) if with_bias else None
+    return q, k, v, qp, ko, ks, bias
+
+
+@pytest.mark.parametrize("name,radius,with_bias", CASES)
+def test_cpu_kernels_gradcheck_float64(name, radius, with_bias):
+    q, k, v, qp, ko, ks, bias = _inputs(name, radius, with_bias, torch.float64)
+    tensors = [t.requires_grad_(True) for t in (q, k, v) + ((bias,) if bias is not None else ())]
+
+    def f(q, k, v, *b):
+        return rana(q, k, v, qp, ko, ks, radius, b[0] if b else None, backend="cpu")
+
+    assert torch.autograd.gradcheck(f, tensors, eps=1e-6, atol=1e-7, rtol=1e-5)
+
+
+@pytest.mark.parametrize("name", ["self", "temporal"])
+def test_reference_gradcheck_float64(name):
+    q, k, v, qp, ko, ks, bias = _inputs(name, 1.5, True, torch.float64)
+    tensors = [t.requires_grad_(True) for t in (q, k, v, bias)]
+    assert torch.autograd.gradcheck(lambda q, k, v, b: rana_reference(q, k, v, qp, ko, ks, 1.5, b), tensors)
+
+
+@pytest.mark.parametrize("name,radius,with_bias", CASES)
+def test_cpu_equals_reference_float32(name, radius, with_bias):
+    q, k, v, qp, ko, ks, bias = _inputs(name, radius, with_bias, torch.float32, d=16, dv=16, heads=4)
+    grads = []
+    for backend in ("cpu", "reference"):
+        ts = [t.clone().requires_grad_(True) for t in (q, k, v) + ((bias,) if bias is not None else ())]
+        out = rana(*ts[:3], qp, ko, ks, radius, ts[3] if bias is not None else None, backend=backend)
+        g = torch.autograd.grad(out, ts, torch.linspace(-1, 1, out.numel()).reshape(out.shape))
+        grads.append((out, g))
+    (a, ga), (b, gb) = grads
+    torch.testing.assert_close(a, b, atol=1e-5, rtol=1e-5)
+    for x, y in zip(ga, gb):
+        torch.testing.assert_close(x, y, atol=1e-5 * max(1.0, float(y.abs().max())), rtol=1e-5)
+
+
+def test_definition_on_a_hand_example():
+    """One query, two key pixels inside the disc and one outside: softmax over exactly the disc's bins."""
+    offs = torch.tensor([0, 1, 3, 4])  # 1x3 grid: pixel 0 one bin, pixel 1 two bins, pixel 2 one bin
+    q = torch.tensor([[[1.0, 0.0]]])
+    k = torch.tensor([[[0.0, 0.0]], [[2.0, 0.0]], [[1.0, 1.0]], [[5.0, 5.0]]])
+    v = torch.tensor([[[1.0]], [[2.0]], [[3.0]], [[100.0]]])
+    qp = torch.tensor([[0, 0]])
+    for backend in ("cpu", "reference"):
+        out = rana(q, k, v, qp, offs, (1, 3), 1.0, backend=backend)
+        logits = torch.tensor([0.0, 2.0, 1.0]) / math.sqrt(2)
+        expected = (torch.softmax(logits, 0) * torch.tensor([1.0, 2.0, 3.0])).sum()
+        torch.testing.assert_close(out.flatten(), expected.reshape(1))
+
+
+def test_empty_disc_gives_zeros_and_zero_grads():
+    offs = torch.tensor([0, 0, 0, 2])  # only the last of 3 pixels has bins
+    q, k, v = qkv(2, 2, 2, 4, 3, torch.float64)
+    qp = torch.tensor([[0, 0], [0, 2]])
+    for backend in ("cpu", "reference"):
+        qq = q.clone().requires_grad_(True)
+        out = rana(qq, k, v, qp, offs, (1, 3), 1.0, backend=backend)
+        assert torch.all(out[0] == 0) and torch.any(out[1] != 0)
+        (g,) = torch.autograd.grad(out.sum(), [qq])
+        assert torch.all(g[0] == 0)
+
+
+def test_deterministic_across_runs_and_threads():
+    offs = ragged_offsets(24, 20, max_bins=6, seed=3)
+    qp, ko, ks = self_attention_layout(offs, 24, 20)
+    q, k, v = qkv(qp.shape[0], int(ko[-1]), 4, 16, 16, torch.float32)
+    bias = torch.randn(4, 7, 7)
+    results = []
+    before = torch.get_num_threads()
+    try:
+        for threads in (1, 2, 2):
+            torch.set_num_threads(threads)
+            ts = [t.clone().requires_grad_(True) for t in (q, k, v, bias)]
+            out = rana(*ts[:3], qp, ko, ks, 3.5, ts[3], backend="cpu")
+            grads = torch.autograd.grad(out, ts, torch.ones_like(out))
+            results.append((out, *grads))
+    finally:
+        torch.set_num_threads(before)
+    for other in results[1:]:
+        for x, y in zip(results[0], other):
+            assert torch.equal(x, y)
+
+
+def test_custom_op_registration():
+    q, k, v, qp, ko, ks, bias = _inputs("self", 1.5, True, torch.float32)
+    args = (q.requires_grad_(True), k.requires_grad_(True), v, qp, ko, ks[0], ks[1], 1.5, bias.requires_grad_(True))
+    torch.library.opcheck(rana_fwd, args)
+
+
+def test_validation_errors():
+    q, k, v, qp, ko, ks, bias = _inputs("self", 1.5, True, torch.float32)
+    with pytest.raises(ValueError, match="bias must be"):
+        rana(q, k, v, qp, ko, ks, 2.5, bias)
+    with pytest.raises(ValueError, match="query centres"):
+        rana(q, k, v, qp + 100, ko, ks, 1.5)
+    with pytest.raises(ValueError, match="k_offsets"):
+        rana(q, k, v, qp, ko[:-1], ks, 1.5)
+
+
+def test_fallback_to_reference_with_a_warning(monkeypatch):
+    q, k, v, qp, ko, ks, bias = _inputs("self", 1.5, True, torch.float32)
+    expected = rana_reference(q, k, v, qp, ko, ks, 1.5, bias)
+    monkeypatch.setenv("RANAD_NO_EXTENSION", "1")
+    extension.load_cpu_extension.cache_clear()
+    extension.cpu_extension_or_none.cache_clear()
+    try:
+        with pytest.warns(RuntimeWarning, match="using the slow torch reference"):
+            out = rana(q, k, v, qp, ko, ks, 1.5, bias)
+        torch.testing.assert_close(out, expected)
+    finally:
+        monkeypatch.delenv("RANAD_NO_EXTENSION")
+        extension.load_cpu_extension.cache_clear()
+        extension.cpu_extension_or_none.cache_clear()
+    assert extension.cpu_extension_or_none() is not None
+
+
+def test_disc_is_the_l2_disc():
+    for r in (0.0, 1.0, 1.5, 2.5, 3.5):
+        d = disc(r)
+        expected = {(y, x) for y in range(-4, 5) for x in range(-4, 5) if y * y + x * x <= r * r}
+        assert set(d.offsets()) == expected and d.size == len(expected)
+    assert disc(3.5).size == 37
+
+
+def test_concat_frames_matches_a_loop():
+    frames = [ragged_offsets(3, 4, seed=s, heavy=False) for s in range(3)]
+    offs, gather, frame = concat_frames(frames)
+    base = [0, int(frames[0][-1]), int(frames[0][-1]) + int(frames[1][-1])]
+    rows = []
+    for p in range(12):
+        for t, o in enumerate(frames):
+            rows += [(base[t] + i, t) for i in range(int(o[p]), int(o[p + 1]))]
+    assert gather.tolist() == [r for r, _ in rows] and frame.tolist() == [t for _, t in rows]
+    assert offs[-1] == len(rows)
+
+
+def test_downsample_layout_keeps_pixels():
+    offs = ragged_offsets(5, 4, seed=2)
+    keep = torch.arange(int(offs[-1])) % 2 == 0
+    idx, qp, sparse = downsample_layout(offs, 4, keep)
+    assert torch.equal(qp, bin_pixels(offs, 4)[idx]) and int(sparse[-1]) == int(keep.sum())
+    assert torch.equal(bin_pixels(sparse, 4), qp)
