@@ -34,6 +34,8 @@ namespace rana {
 
 constexpr int kLanes = 16;     // blocks are padded to a multiple of this (one AVX-512 float vector)
 constexpr int kTile = 64;      // entries per tile of the transposed operands
+constexpr int kMaxDim = 64;    // largest head dimension the kernels accept (compile-time sizes are faster)
+constexpr int kGroup = 4;      // queries (or keys) of one pixel processed together: they share a neighbourhood
 
 // Pointer to entry idx of head h in a tiled transposed operand [N / kTile + 1][H][d][kTile]; channel c of
 // the following entries is at ptr + c * kTile.
@@ -108,28 +110,85 @@ RANA_HD T bias_at(const T* bias, int h, int R, int dy, int dx) {
   return bias ? bias[(h * side + (dy + R)) * side + (dx + R)] : T(0);
 }
 
-// s[j] = scale * sum_c a[c] * Bt[c * ld + j] for j < nr: one row of logits against transposed operands.
-// Chunks of kLanes outputs are accumulated in a fixed-size local array (one vector register on the CPU).
-template <typename T, int D>
-RANA_HD void block_dot(const T* __restrict__ a, const T* __restrict__ Bt, int64_t ld, int d, T scale, int nr,
-                       T* __restrict__ s) {
+// s[g * sld + j] = scale * sum_c a[g][c] * Bt[c * ld + j], j < nr, for the G rows a[0..G): one block of
+// logits for G queries (or keys) against transposed operands. Each loaded vector of Bt serves all G rows,
+// and the G accumulators are independent FMA chains. a is a local copy (see gather_rows): reading the rows
+// through an array of pointers made the compiler reload the pointers in the inner loop.
+
+// a[g][c] = src[g][c]: the G rows a group works on, copied next to each other.
+template <typename T, int D, int G>
+RANA_HD void gather_rows(const T* const* src, int d, T (*a)[D > 0 ? D : kMaxDim]) {
+  const int nd = D > 0 ? D : d;
+  for (int g = 0; g < G; ++g)
+    for (int c = 0; c < nd; ++c) a[g][c] = src[g][c];
+}
+
+template <typename T, int D, int G>
+RANA_HD void dot_group(const T (*__restrict__ a)[D > 0 ? D : kMaxDim], const T* __restrict__ Bt, int64_t ld, int d,
+                       T scale, int nr, T* __restrict__ s, int sld) {
   const int nd = D > 0 ? D : d;
   for (int jb = 0; jb < nr; jb += kLanes) {
-    T acc[kLanes];
-    RANA_SIMD
-    for (int u = 0; u < kLanes; ++u) acc[u] = T(0);
-    for (int c = 0; c < nd; ++c) {
-      const T ac = a[c];
-      const T* __restrict__ b = Bt + c * ld + jb;
+    T acc[G][kLanes];
+    for (int g = 0; g < G; ++g) {
       RANA_SIMD
-      for (int u = 0; u < kLanes; ++u) acc[u] += ac * b[u];
+      for (int u = 0; u < kLanes; ++u) acc[g][u] = T(0);
     }
-    RANA_SIMD
-    for (int u = 0; u < kLanes; ++u) s[jb + u] = acc[u] * scale;
+    for (int c = 0; c < nd; ++c) {
+      const T* __restrict__ b = Bt + c * ld + jb;
+      for (int g = 0; g < G; ++g) {
+        const T ac = a[g][c];
+        RANA_SIMD
+        for (int u = 0; u < kLanes; ++u) acc[g][u] += ac * b[u];
+      }
+    }
+    for (int g = 0; g < G; ++g) {
+      RANA_SIMD
+      for (int u = 0; u < kLanes; ++u) s[g * sld + jb + u] = acc[g][u] * scale;
+    }
   }
 }
 
-// max over s[0..n) (s padded to nr), -inf when n == 0
+// acc[g][c] += sum_j w[g * wld + j] * rows[j * stride + c] for the G rows of weights: each loaded row serves
+// all G accumulators; small groups split the sum over P partial accumulators to keep FMA chains independent.
+template <typename T, int D, int G>
+RANA_HD void weighted_rows_group(const T* __restrict__ w, int wld, int n, const T* __restrict__ rows, int64_t stride,
+                                 int d, T (*acc)[D > 0 ? D : kMaxDim]) {
+  constexpr int DM = D > 0 ? D : kMaxDim;
+  constexpr int P = G >= 3 ? 1 : (G == 2 ? 2 : 4);  // partial sums so that small groups have 4+ FMA chains
+  const int nd = D > 0 ? D : d;
+  T part[G][P][DM];
+  for (int g = 0; g < G; ++g)
+    for (int p = 0; p < P; ++p) {
+      RANA_SIMD
+      for (int c = 0; c < nd; ++c) part[g][p][c] = T(0);
+    }
+  int j = 0;
+  for (; j + P <= n; j += P) {
+    for (int p = 0; p < P; ++p) {
+      const T* __restrict__ r = rows + (j + p) * stride;
+      for (int g = 0; g < G; ++g) {
+        const T wj = w[g * wld + j + p];
+        RANA_SIMD
+        for (int c = 0; c < nd; ++c) part[g][p][c] += wj * r[c];
+      }
+    }
+  }
+  for (; j < n; ++j) {
+    const T* __restrict__ r = rows + j * stride;
+    for (int g = 0; g < G; ++g) {
+      const T wj = w[g * wld + j];
+      RANA_SIMD
+      for (int c = 0; c < nd; ++c) part[g][0][c] += wj * r[c];
+    }
+  }
+  for (int g = 0; g < G; ++g)
+    for (int p = 0; p < P; ++p) {
+      RANA_SIMD
+      for (int c = 0; c < nd; ++c) acc[g][c] += part[g][p][c];
+    }
+}
+
+// max over s[0..n) (s padded to nr with finite values), -inf when n == 0
 template <typename T>
 RANA_HD T block_max(const T* __restrict__ s, int n, int nr) {
   T mx[kLanes];
@@ -167,61 +226,32 @@ RANA_HD T block_exp(T* __restrict__ s, int n, int nr, T sub) {
   return total;
 }
 
-// acc[c] += sum_j w[j] * rows[j * stride + c]: weighted sum of n rows (values, keys or queries).
-template <typename T, int D>
-RANA_HD void block_weighted_rows(const T* __restrict__ w, int n, const T* __restrict__ rows, int64_t stride, int d,
-                                 T* __restrict__ acc) {
-  const int nd = D > 0 ? D : d;
-  for (int j = 0; j < n; ++j) {
-    const T wj = w[j];
-    const T* __restrict__ r = rows + j * stride;
-    RANA_SIMD
-    for (int c = 0; c < nd; ++c) acc[c] += wj * r[c];
-  }
-}
-
-// Online softmax (FlashAttention): fold one block of logits s[0..n) (padded to nr) with value rows into
-// the running max m, sum l and accumulator acc[DV]. s is overwritten with the block's probabilities.
-template <typename T, int DV>
-RANA_HD void softmax_fold(T* __restrict__ s, int n, int nr, const T* __restrict__ v_rows, int64_t v_stride, int dv,
-                          T* m, T* l, T* __restrict__ acc) {
-  const T bm = block_max(s, n, nr);
-  const T mb = bm > *m ? bm : *m;
-  if (mb == neg_inf<T>()) return;
-  const T corr = (*m == neg_inf<T>()) ? T(0) : fast_exp(*m - mb);
-  const T sum = block_exp(s, n, nr, mb);
-  const int nv = DV > 0 ? DV : dv;
-  if (corr != T(1)) {
-    RANA_SIMD
-    for (int c = 0; c < nv; ++c) acc[c] *= corr;
-  }
-  block_weighted_rows<T, DV>(s, n, v_rows, v_stride, nv, acc);
-  *l = *l * corr + sum;
-  *m = mb;
-}
-
-// Adds each pixel's relative-position bias to its segment of a row block of logits.
-// Keys of pixel p occupy s[offsets[p] - kb ...]; the block covers keys [kb, kb + n).
-template <typename T>
-RANA_HD void add_row_bias(T* s, const T* bias, int h, int R, int dy, int64_t p0, int64_t p1, int64_t first_dx,
-                          const int64_t* offsets, int64_t kb, int n) {
+// Adds each pixel's relative-position bias to its entries of a block in G rows of logits (row stride sld).
+// Entries of pixel p are ptr[p] - start .. ptr[p+1] - start (ptr: key offsets, or the query CSR); the block
+// covers [start, start + n); dx of pixel p is dx_first + sign * (p - p0).
+template <typename T, int G>
+RANA_HD void add_block_bias(T* s, int sld, const T* bias, int h, int R, int dy, int64_t p0, int64_t p1,
+                            int64_t dx_first, int sign, const int64_t* ptr, int64_t start, int n) {
   if (!bias) return;
   for (int64_t p = p0; p <= p1; ++p) {
-    int64_t a = offsets[p] - kb, b = offsets[p + 1] - kb;
+    int64_t a = ptr[p] - start, b = ptr[p + 1] - start;
     if (b <= 0 || a >= n) continue;
     a = a < 0 ? 0 : a;
     b = b > n ? n : b;
-    const T bv = bias_at(bias, h, R, dy, int(first_dx + (p - p0)));
-    for (int64_t j = a; j < b; ++j) s[j] += bv;
+    const T bv = bias_at(bias, h, R, dy, int(dx_first + sign * (p - p0)));
+    for (int g = 0; g < G; ++g)
+      for (int64_t j = a; j < b; ++j) s[g * sld + j] += bv;
   }
 }
 
-// ---- per query and head -----------------------------------------------------------------------------
-// The kernels stream the disc's row blocks into one logit buffer (kBuffer entries) and run the softmax
-// step once per full buffer rather than once per row, which keeps the fixed cost per block (reductions,
-// rescaling) small against the work. Each block remembers where its entries sit in the buffer.
-constexpr int kBuffer = 256;      // logits buffered per flush (plus kLanes of padding)
-constexpr int kMaxSegments = 64;  // row blocks per flush
+// ---- per group of queries (or keys) of one pixel, per head -----------------------------------------
+// The kernels stream the disc's row blocks into one buffer of logits per group member (kBuffer entries) and
+// run the softmax step once per full buffer rather than once per row, which keeps the fixed cost per block
+// (reductions, rescaling) small against the work. Each block remembers where its entries sit in the buffer.
+// A GPU kernel built on these runs them with G = 1 (one thread per query or key).
+constexpr int kBuffer = 256;                // entries buffered per flush
+constexpr int kStride = kBuffer + kLanes;   // row stride of the per-member buffers (room for padding)
+constexpr int kMaxSegments = 64;            // row blocks per flush
 
 struct Segment {
   int64_t start;  // first key (or query) of the block
@@ -231,33 +261,45 @@ struct Segment {
   int64_t p0, p1; // first and last pixel of the row span
 };
 
-// Forward: out_h[DV] and the returned log-sum-exp (-inf and zeros when the disc holds no key bins).
-// Kt: tiled transposed keys; v: values [Nk, H, dv]. s: scratch of kBuffer + kLanes entries,
-// seg: scratch of kMaxSegments segments.
-template <typename T, int DK, int DV>
-RANA_HD T forward_query_head(const T* __restrict__ q_h, const T* __restrict__ Kt, const T* __restrict__ v, const Grid& g, const DiscRows& rows, const T* bias,
-                             int64_t y, int64_t x, int h, int H, int dk, int dv, T scale, T* __restrict__ out_h,
-                             T* __restrict__ s, Segment* seg) {
+// Forward for G queries centred on pixel (y, x): out_g[g][DV] and lse_g[g] (-inf and zeros when the disc
+// holds no key bins). Kt: tiled transposed keys; v: values [Nk, H, dv]. s: scratch [G][kStride],
+// seg: scratch of kMaxSegments.
+template <typename T, int DK, int DV, int G>
+RANA_HD void forward_group_head(const T* const* q_g, const T* __restrict__ Kt, const T* __restrict__ v,
+                                const Grid& g, const DiscRows& rows, const T* bias, int64_t y, int64_t x, int h,
+                                int H, int dk, int dv, T scale, T* const* out_g, T* lse_g, T* __restrict__ s,
+                                Segment* seg) {
+  constexpr int DM = DV > 0 ? DV : kMaxDim;
   const int nv = DV > 0 ? DV : dv;
-  for (int c = 0; c < nv; ++c) out_h[c] = T(0);
-  T m = neg_inf<T>(), l = T(0);
+  T acc[G][DM];
+  T m[G], l[G];
+  for (int gi = 0; gi < G; ++gi) {
+    m[gi] = neg_inf<T>();
+    l[gi] = T(0);
+    for (int c = 0; c < nv; ++c) acc[gi][c] = T(0);
+  }
+  T qa[G][DK > 0 ? DK : kMaxDim];
+  gather_rows<T, DK, G>(q_g, dk, qa);
   int off = 0, ns = 0;
   auto flush = [&]() {
     if (off == 0) return;
     const int nr = round_up(off);
-    const T bm = block_max(s, off, nr);
-    const T mb = bm > m ? bm : m;
-    const T corr = (m == neg_inf<T>()) ? T(0) : fast_exp(m - mb);
-    const T sum = block_exp(s, off, nr, mb);
-    if (corr != T(1)) {
-      RANA_SIMD
-      for (int c = 0; c < nv; ++c) out_h[c] *= corr;
+    for (int gi = 0; gi < G; ++gi) {
+      T* sg = s + gi * kStride;
+      const T bm = block_max(sg, off, nr);
+      const T mb = bm > m[gi] ? bm : m[gi];
+      const T corr = (m[gi] == neg_inf<T>()) ? T(0) : fast_exp(m[gi] - mb);
+      const T sum = block_exp(sg, off, nr, mb);
+      if (corr != T(1)) {
+        RANA_SIMD
+        for (int c = 0; c < nv; ++c) acc[gi][c] *= corr;
+      }
+      l[gi] = l[gi] * corr + sum;
+      m[gi] = mb;
     }
     for (int i = 0; i < ns; ++i)
-      block_weighted_rows<T, DV>(s + seg[i].off, seg[i].n, v + (seg[i].start * H + h) * nv, int64_t(H) * nv, nv,
-                                 out_h);
-    l = l * corr + sum;
-    m = mb;
+      weighted_rows_group<T, DV, G>(s + seg[i].off, kStride, seg[i].n, v + (seg[i].start * H + h) * nv,
+                                    int64_t(H) * nv, nv, acc);
     off = ns = 0;
   };
   for (int r = 0; r < rows.n; ++r) {
@@ -267,46 +309,64 @@ RANA_HD T forward_query_head(const T* __restrict__ q_h, const T* __restrict__ Kt
     const int64_t first_dx = p0 - (y + dy) * g.Wk - x;
     for (int64_t kb = g.offsets[p0], ke = g.offsets[p1 + 1], n; kb < ke; kb += n) {
       n = tile_block(kb, ke - kb);
-      if (off + round_up(n) > kBuffer || ns == kMaxSegments) flush();
-      block_dot<T, DK>(q_h, tile_ptr(Kt, kb, h, H, dk), kTile, dk, scale, round_up(n), s + off);
-      add_row_bias(s + off, bias, h, rows.R, dy, p0, p1, first_dx, g.offsets, kb, n);
+      if (off + round_up(int(n)) > kBuffer || ns == kMaxSegments) flush();
+      dot_group<T, DK, G>(qa, tile_ptr(Kt, kb, h, H, dk), kTile, dk, scale, round_up(int(n)), s + off, kStride);
+      add_block_bias<T, G>(s + off, kStride, bias, h, rows.R, dy, p0, p1, first_dx, 1, g.offsets, kb, int(n));
       seg[ns++] = Segment{kb, int(n), off, dy, p0, p1};
-      off += n;
+      off += int(n);
     }
   }
   flush();
-  if (m == neg_inf<T>()) return m;
-  const T inv = T(1) / l;
-  for (int c = 0; c < nv; ++c) out_h[c] *= inv;
-  return m + std::log(l);
+  for (int gi = 0; gi < G; ++gi) {
+    if (m[gi] == neg_inf<T>()) {
+      for (int c = 0; c < nv; ++c) out_g[gi][c] = T(0);
+      lse_g[gi] = m[gi];
+      continue;
+    }
+    const T inv = T(1) / l[gi];
+    for (int c = 0; c < nv; ++c) out_g[gi][c] = acc[gi][c] * inv;
+    lse_g[gi] = m[gi] + std::log(l[gi]);
+  }
 }
 
-// dQ for one query and head (FlashAttention-2: p = exp(s - lse), ds = p (dO.v - delta), dq = scale ds k).
-// Kt, Vt: tiled transposed keys and values; k: keys [Nk, H, dk]. s, t: scratch of kBuffer + kLanes.
-template <typename T, int DK, int DV>
-RANA_HD void backward_dq_head(const T* __restrict__ q_h, const T* __restrict__ Kt, const T* __restrict__ Vt,
-                              const T* __restrict__ k, const T* __restrict__ do_h, T lse, T delta,
-                              const Grid& g, const DiscRows& rows, const T* bias, int64_t y, int64_t x, int h, int H,
-                              int dk, int dv, T scale, T* __restrict__ dq_h, T* __restrict__ s, T* __restrict__ t,
-                              Segment* seg) {
+// dQ for G queries centred on (y, x) (FlashAttention-2: p = exp(s - lse), ds = p (dO.v - delta),
+// dq = scale sum ds k). lse_g must be +inf (not -inf) for queries with an empty disc, giving p = 0.
+// Kt, Vt: tiled transposed keys and values; k: keys [Nk, H, dk]. s, t: scratch [G][kStride].
+template <typename T, int DK, int DV, int G>
+RANA_HD void backward_dq_group_head(const T* const* q_g, const T* const* do_g, const T* lse_g, const T* delta_g,
+                                    const T* __restrict__ Kt, const T* __restrict__ Vt, const T* __restrict__ k,
+                                    const Grid& g, const DiscRows& rows, const T* bias, int64_t y, int64_t x, int h,
+                                    int H, int dk, int dv, T scale, T* const* dq_g, T* __restrict__ s,
+                                    T* __restrict__ t, Segment* seg) {
+  constexpr int DM = DK > 0 ? DK : kMaxDim;
   const int nk = DK > 0 ? DK : dk;
-  for (int c = 0; c < nk; ++c) dq_h[c] = T(0);
-  if (lse == neg_inf<T>()) return;
+  T acc[G][DM];
+  for (int gi = 0; gi < G; ++gi)
+    for (int c = 0; c < nk; ++c) acc[gi][c] = T(0);
+  T qa[G][DK > 0 ? DK : kMaxDim];
+  T da[G][DV > 0 ? DV : kMaxDim];
+  gather_rows<T, DK, G>(q_g, dk, qa);
+  gather_rows<T, DV, G>(do_g, dv, da);
   int off = 0, ns = 0;
   auto flush = [&]() {
     if (off == 0) return;
     const int nr = round_up(off);
-    for (int jb = 0; jb < nr; jb += kLanes) {
-      RANA_SIMD
-      for (int u = 0; u < kLanes; ++u) {
-        const int j = jb + u;
-        const T e = fast_exp(s[j] - lse) * (t[j] - delta) * scale;
-        s[j] = j < off ? e : T(0);
+    for (int gi = 0; gi < G; ++gi) {
+      T* __restrict__ sg = s + gi * kStride;
+      const T* __restrict__ tg = t + gi * kStride;
+      const T lse = lse_g[gi], delta = delta_g[gi];
+      for (int jb = 0; jb < nr; jb += kLanes) {
+        RANA_SIMD
+        for (int u = 0; u < kLanes; ++u) {
+          const int j = jb + u;
+          const T e = fast_exp(sg[j] - lse) * (tg[j] - delta) * scale;
+          sg[j] = j < off ? e : T(0);
+        }
       }
     }
     for (int i = 0; i < ns; ++i)
-      block_weighted_rows<T, DK>(s + seg[i].off, seg[i].n, k + (seg[i].start * H + h) * nk, int64_t(H) * nk, nk,
-                                 dq_h);
+      weighted_rows_group<T, DK, G>(s + seg[i].off, kStride, seg[i].n, k + (seg[i].start * H + h) * nk,
+                                    int64_t(H) * nk, nk, acc);
     off = ns = 0;
   };
   for (int r = 0; r < rows.n; ++r) {
@@ -316,52 +376,68 @@ RANA_HD void backward_dq_head(const T* __restrict__ q_h, const T* __restrict__ K
     const int64_t first_dx = p0 - (y + dy) * g.Wk - x;
     for (int64_t kb = g.offsets[p0], ke = g.offsets[p1 + 1], n; kb < ke; kb += n) {
       n = tile_block(kb, ke - kb);
-      if (off + round_up(n) > kBuffer || ns == kMaxSegments) flush();
-      block_dot<T, DK>(q_h, tile_ptr(Kt, kb, h, H, dk), kTile, dk, scale, round_up(n), s + off);
-      add_row_bias(s + off, bias, h, rows.R, dy, p0, p1, first_dx, g.offsets, kb, n);
-      block_dot<T, DV>(do_h, tile_ptr(Vt, kb, h, H, dv), kTile, dv, T(1), round_up(n), t + off);
+      if (off + round_up(int(n)) > kBuffer || ns == kMaxSegments) flush();
+      const int nr = round_up(int(n));
+      dot_group<T, DK, G>(qa, tile_ptr(Kt, kb, h, H, dk), kTile, dk, scale, nr, s + off, kStride);
+      add_block_bias<T, G>(s + off, kStride, bias, h, rows.R, dy, p0, p1, first_dx, 1, g.offsets, kb, int(n));
+      dot_group<T, DV, G>(da, tile_ptr(Vt, kb, h, H, dv), kTile, dv, T(1), nr, t + off, kStride);
       seg[ns++] = Segment{kb, int(n), off, dy, p0, p1};
-      off += n;
+      off += int(n);
     }
   }
   flush();
+  for (int gi = 0; gi < G; ++gi)
+    for (int c = 0; c < nk; ++c) dq_g[gi][c] = acc[gi][c];
 }
 
-// dK, dV (and the bias gradient) for one key bin and head from its reverse neighbourhood: the queries whose
-// disc contains the key's pixel. Queries are sorted by centre pixel (q_ptr: CSR over the grid), and their
-// operands are given in that order: Qt/dOt tiled transposed, qs/dos natural [Nq, H, d], lse_h/delta_h
-// [Nq + kLanes] (lse = +inf for queries with an empty disc, so their probabilities are 0). Sums run in a fixed
-// order without atomics. dbias_h (may be null) accumulates ds per relative offset.
-// s, t, L, D: scratch of kBuffer + kLanes entries; seg: kMaxSegments.
-template <typename T, int DK, int DV>
-RANA_HD void backward_dkdv_head(const T* __restrict__ k_jh, const T* __restrict__ v_jh, const T* __restrict__ Qt,
-                                const T* __restrict__ dOt, const T* __restrict__ qs,
-                                const T* __restrict__ dos, const T* __restrict__ lse_h, const T* __restrict__ delta_h,
-                                const int64_t* q_ptr, const Grid& g, const DiscRows& rows, const T* bias, int64_t ky,
-                                int64_t kx, int h, int H, int dk, int dv, T scale, T* __restrict__ dk_jh,
-                                T* __restrict__ dv_jh, T* dbias_h, T* __restrict__ s, T* __restrict__ t,
-                                T* __restrict__ L, T* __restrict__ D, Segment* seg) {
+// dK, dV (and the bias gradient) for G keys of the key pixel (ky, kx) from their reverse neighbourhood: the
+// queries whose disc contains the pixel. Queries are sorted by centre pixel (q_ptr: CSR over the grid) and
+// their operands given in that order: Qt/dOt tiled transposed, qs/dos natural [Nq, H, d], lse_h/delta_h
+// [Nq + kLanes] (lse = +inf for queries with an empty disc and for the padding, so their probabilities are
+// 0). Sums run in a fixed order without atomics. dbias_h (may be null) accumulates ds per relative offset.
+// s, t: scratch [G][kStride]; L, D: scratch [kStride]; seg: kMaxSegments.
+template <typename T, int DK, int DV, int G>
+RANA_HD void backward_dkdv_group_head(const T* const* k_g, const T* const* v_g, const T* __restrict__ Qt,
+                                      const T* __restrict__ dOt, const T* __restrict__ qs, const T* __restrict__ dos,
+                                      const T* __restrict__ lse_h, const T* __restrict__ delta_h, const int64_t* q_ptr,
+                                      const Grid& g, const DiscRows& rows, const T* bias, int64_t ky, int64_t kx,
+                                      int h, int H, int dk, int dv, T scale, T* const* dk_g, T* const* dv_g,
+                                      T* dbias_h, T* __restrict__ s, T* __restrict__ t, T* __restrict__ L,
+                                      T* __restrict__ D, Segment* seg) {
+  constexpr int DKM = DK > 0 ? DK : kMaxDim;
+  constexpr int DVM = DV > 0 ? DV : kMaxDim;
   const int nk = DK > 0 ? DK : dk, nv = DV > 0 ? DV : dv;
   const int side = 2 * rows.R + 1;
-  for (int c = 0; c < nk; ++c) dk_jh[c] = T(0);
-  for (int c = 0; c < nv; ++c) dv_jh[c] = T(0);
+  T acc_k[G][DKM], acc_v[G][DVM];
+  for (int gi = 0; gi < G; ++gi) {
+    for (int c = 0; c < nk; ++c) acc_k[gi][c] = T(0);
+    for (int c = 0; c < nv; ++c) acc_v[gi][c] = T(0);
+  }
+  T ka[G][DKM], va[G][DVM];
+  gather_rows<T, DK, G>(k_g, dk, ka);
+  gather_rows<T, DV, G>(v_g, dv, va);
   int off = 0, ns = 0;
   auto flush = [&]() {
     if (off == 0) return;
     const int nr = round_up(off);
-    for (int jb = 0; jb < nr; jb += kLanes) {
-      RANA_SIMD
-      for (int u = 0; u < kLanes; ++u) {
-        const int j = jb + u;
-        const T e = fast_exp(s[j] - L[j]);
-        const T p = j < off ? e : T(0);
-        s[j] = p;                   // probabilities
-        t[j] = p * (t[j] - D[j]);   // ds
+    for (int gi = 0; gi < G; ++gi) {
+      T* __restrict__ sg = s + gi * kStride;
+      T* __restrict__ tg = t + gi * kStride;
+      for (int jb = 0; jb < nr; jb += kLanes) {
+        RANA_SIMD
+        for (int u = 0; u < kLanes; ++u) {
+          const int j = jb + u;
+          const T e = fast_exp(sg[j] - L[j]);
+          const T p = j < off ? e : T(0);
+          sg[j] = p;                   // probabilities
+          tg[j] = p * (tg[j] - D[j]);  // ds
+        }
       }
     }
     for (int i = 0; i < ns; ++i) {
       const Segment& sg = seg[i];
-      block_weighted_rows<T, DV>(s + sg.off, sg.n, dos + (sg.start * H + h) * nv, int64_t(H) * nv, nv, dv_jh);
+      weighted_rows_group<T, DV, G>(s + sg.off, kStride, sg.n, dos + (sg.start * H + h) * nv, int64_t(H) * nv, nv,
+                                    acc_v);
       if (dbias_h) {  // ds summed per query pixel of the row: each pixel is one relative offset
         const int64_t qy = ky - sg.dy;
         for (int64_t p = sg.p0; p <= sg.p1; ++p) {
@@ -370,23 +446,25 @@ RANA_HD void backward_dkdv_head(const T* __restrict__ k_jh, const T* __restrict_
           a = a < 0 ? 0 : a;
           b = b > sg.n ? sg.n : b;
           T sum = T(0);
-          for (int64_t j = a; j < b; ++j) sum += t[sg.off + j];
+          for (int gi = 0; gi < G; ++gi)
+            for (int64_t j = a; j < b; ++j) sum += t[gi * kStride + sg.off + j];
           const int dx = int(kx - (p - qy * g.Wk));
           dbias_h[(sg.dy + rows.R) * side + (dx + rows.R)] += sum;
         }
       }
     }
-    for (int jb = 0; jb < nr; jb += kLanes) {
-      RANA_SIMD
-      for (int u = 0; u < kLanes; ++u) t[jb + u] *= scale;
-    }
+    for (int gi = 0; gi < G; ++gi)
+      for (int jb = 0; jb < nr; jb += kLanes) {
+        RANA_SIMD
+        for (int u = 0; u < kLanes; ++u) t[gi * kStride + jb + u] *= scale;
+      }
     for (int i = 0; i < ns; ++i)
-      block_weighted_rows<T, DK>(t + seg[i].off, seg[i].n, qs + (seg[i].start * H + h) * nk, int64_t(H) * nk, nk,
-                                 dk_jh);
+      weighted_rows_group<T, DK, G>(t + seg[i].off, kStride, seg[i].n, qs + (seg[i].start * H + h) * nk,
+                                    int64_t(H) * nk, nk, acc_k);
     off = ns = 0;
   };
   for (int r = 0; r < rows.n; ++r) {
-    // queries of the row at qy = ky - dy see this key at offset (dy, kx - qx): mirror the span
+    // queries of the row at qy = ky - dy see these keys at offset (dy, kx - qx): mirror the span
     const int dy = rows.dy[r];
     const int64_t qy = ky - dy;
     if (qy < 0 || qy >= g.Hk) continue;
@@ -397,29 +475,35 @@ RANA_HD void backward_dkdv_head(const T* __restrict__ k_jh, const T* __restrict_
     const int64_t p0 = qy * g.Wk + a, p1 = qy * g.Wk + b;
     for (int64_t qb = q_ptr[p0], qe = q_ptr[p1 + 1], n; qb < qe; qb += n) {
       n = tile_block(qb, qe - qb);
-      if (off + round_up(n) > kBuffer || ns == kMaxSegments) flush();
-      const int nr = round_up(n);
-      block_dot<T, DK>(k_jh, tile_ptr(Qt, qb, h, H, dk), kTile, dk, scale, nr, s + off);
-      if (bias) {
-        for (int64_t p = p0; p <= p1; ++p) {
-          int64_t sa = q_ptr[p] - qb, sb = q_ptr[p + 1] - qb;
-          if (sb <= 0 || sa >= n) continue;
-          sa = sa < 0 ? 0 : sa;
-          sb = sb > n ? n : sb;
-          const T bv = bias_at(bias, h, rows.R, dy, int(kx - (p - qy * g.Wk)));
-          for (int64_t j = sa; j < sb; ++j) s[off + j] += bv;
-        }
-      }
-      block_dot<T, DV>(v_jh, tile_ptr(dOt, qb, h, H, dv), kTile, dv, T(1), nr, t + off);
+      if (off + round_up(int(n)) > kBuffer || ns == kMaxSegments) flush();
+      const int nr = round_up(int(n));
+      dot_group<T, DK, G>(ka, tile_ptr(Qt, qb, h, H, dk), kTile, dk, scale, nr, s + off, kStride);
+      add_block_bias<T, G>(s + off, kStride, bias, h, rows.R, dy, p0, p1, kx - a, -1, q_ptr, qb, int(n));
+      dot_group<T, DV, G>(va, tile_ptr(dOt, qb, h, H, dv), kTile, dv, T(1), nr, t + off, kStride);
       for (int j = 0; j < nr; ++j) {  // padded operands: lse +inf, delta 0 beyond the last query
         L[off + j] = lse_h[qb + j];
         D[off + j] = delta_h[qb + j];
       }
       seg[ns++] = Segment{qb, int(n), off, dy, p0, p1};
-      off += n;
+      off += int(n);
     }
   }
   flush();
+  for (int gi = 0; gi < G; ++gi) {
+    for (int c = 0; c < nk; ++c) dk_g[gi][c] = acc_k[gi][c];
+    for (int c = 0; c < nv; ++c) dv_g[gi][c] = acc_v[gi][c];
+  }
+}
+
+// Calls f.template operator()<G>() with G = n for 1 <= n <= kGroup (the size of a partial group).
+template <typename F>
+RANA_HD void with_group_size(int n, F&& f) {
+  switch (n) {
+    case 1: f.template operator()<1>(); break;
+    case 2: f.template operator()<2>(); break;
+    case 3: f.template operator()<3>(); break;
+    default: f.template operator()<4>(); break;
+  }
 }
 
 }  // namespace rana
