@@ -82,6 +82,8 @@ def main() -> None:
                                  ("reference", args.ref_size, "reference")):
         fwd, both, pairs, bins = run(size, args.radius, args.heads, args.dim, backend, args.repeats)
         rows.append((label, size, fwd, both, pairs))
+        if backend == "cpu" and size == args.size:
+            peak_cpp = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
         print(f"{label:12s} {size}x{size} ({bins} bins, {pairs / 1e6:.1f} M pairs): "
               f"forward {fwd * 1e3:8.1f} ms = {pairs / fwd / 1e6:6.1f} M pairs/s, {pairs * flop / fwd / 1e9:5.1f} "
               f"GFLOP/s | forward+backward {both * 1e3:8.1f} ms = {pairs / both / 1e6:6.1f} M pairs/s")
@@ -89,7 +91,9 @@ def main() -> None:
     _, _, f_ref, b_ref, _ = rows[2]
     print(f"speed-up over the reference at {args.ref_size}x{args.ref_size}: forward {f_ref / f_small:.0f}x, "
           f"forward+backward {b_ref / b_small:.0f}x")
-    print(f"peak resident memory of this process: {resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024:.0f} MB")
+    print(f"peak resident memory: {peak_cpp:.0f} MB after the C++ runs at {args.size}x{args.size}, "
+          f"{resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024:.0f} MB after the reference at "
+          f"{args.ref_size}x{args.ref_size} (its pair list is materialised)")
 
 
 if __name__ == "__main__":

@@ -64,12 +64,29 @@ Problem make_problem(const torch::Tensor& q, const torch::Tensor& k, const torch
 
 int threads() { return at::get_num_threads(); }
 
-// [N, H, d] -> [N / kTile + 1, H, d, kTile] (zero padding): the tiled transposed layout of rana_math.h
-torch::Tensor transposed(const torch::Tensor& x) {
-  const int64_t n = x.size(0), tiles = n / rana::kTile + 1;
-  auto padded = torch::zeros({tiles * rana::kTile, x.size(1), x.size(2)}, x.options());
-  padded.narrow(0, 0, n).copy_(x);
-  return padded.view({tiles, rana::kTile, x.size(1), x.size(2)}).permute({0, 2, 3, 1}).contiguous();
+// [N, H, d] -> [N / kTile + 1, H, d, kTile] (zero padding): the tiled transposed layout of rana_math.h.
+// Row j of the result is row order[j] of x when order is given (queries in pixel order). One parallel pass:
+// torch's generic strided copy took ~60 ms per operand on a 256x256 layout.
+template <typename T>
+torch::Tensor transposed(const torch::Tensor& x, const int64_t* order = nullptr) {
+  const int64_t n = x.size(0), H = x.size(1), d = x.size(2), tiles = n / rana::kTile + 1;
+  auto out = torch::empty({tiles, H, d, rana::kTile}, x.options());
+  const T* src = x.data_ptr<T>();
+  T* dst = out.data_ptr<T>();
+#pragma omp parallel for schedule(static) num_threads(threads())
+  for (int64_t tile = 0; tile < tiles; ++tile) {
+    T* block = dst + tile * H * d * rana::kTile;
+    for (int64_t jj = 0; jj < rana::kTile; ++jj) {
+      const int64_t j = tile * rana::kTile + jj;
+      if (j >= n) {
+        for (int64_t e = 0; e < H * d; ++e) block[e * rana::kTile + jj] = T(0);
+        continue;
+      }
+      const T* row = src + (order ? order[j] : j) * H * d;
+      for (int64_t e = 0; e < H * d; ++e) block[e * rana::kTile + jj] = row[e];
+    }
+  }
+  return out;
 }
 
 // Queries sorted by centre pixel: CSR over the key grid (ptr[p]..ptr[p+1] index into order), ascending query id
@@ -77,17 +94,19 @@ torch::Tensor transposed(const torch::Tensor& x) {
 struct QueryIndex {
   std::vector<int64_t> ptr;
   torch::Tensor order;
+  bool identity;  // queries already in pixel order (self-attention layouts): no reordered copies needed
 };
 
 QueryIndex index_queries(const torch::Tensor& qpix_t, const Grid& g) {
   const int64_t nq = qpix_t.size(0), npix = g.Hk * g.Wk;
   const int64_t* qpix = qpix_t.data_ptr<int64_t>();
-  QueryIndex qi{std::vector<int64_t>(npix + 1, 0), torch::empty({nq}, qpix_t.options())};
+  QueryIndex qi{std::vector<int64_t>(npix + 1, 0), torch::empty({nq}, qpix_t.options()), true};
   int64_t* order = qi.order.data_ptr<int64_t>();
   for (int64_t i = 0; i < nq; ++i) qi.ptr[qpix[2 * i] * g.Wk + qpix[2 * i + 1] + 1]++;
   for (int64_t p = 0; p < npix; ++p) qi.ptr[p + 1] += qi.ptr[p];
   std::vector<int64_t> fill(qi.ptr.begin(), qi.ptr.end() - 1);
   for (int64_t i = 0; i < nq; ++i) order[fill[qpix[2 * i] * g.Wk + qpix[2 * i + 1]]++] = i;
+  for (int64_t i = 0; i < nq && qi.identity; ++i) qi.identity = order[i] == i;
   return qi;
 }
 
@@ -149,7 +168,7 @@ void backward_impl(const Problem& pb, const torch::Tensor& q_t, const torch::Ten
 
   // pass 1: dQ, per group of queries of one pixel
   {
-    auto Kt_t = transposed(k_t), Vt_t = transposed(v_t);
+    torch::Tensor Kt_t = transposed<T>(k_t), Vt_t = transposed<T>(v_t);
     const T* Kt = Kt_t.data_ptr<T>();
     const T* Vt = Vt_t.data_ptr<T>();
     for_each_group(qi.ptr.data(), npix, [&](int64_t p, int64_t first, int n) {
@@ -178,8 +197,10 @@ void backward_impl(const Problem& pb, const torch::Tensor& q_t, const torch::Ten
 
   // pass 2: dK, dV per group of keys of one pixel; the queries' operands in pixel order
   const int64_t ldq = pb.nq + rana::kLanes;
-  auto qs_t = q_t.index_select(0, qi.order), dos_t = dout_t.index_select(0, qi.order);
-  auto Qt_t = transposed(qs_t), dOt_t = transposed(dos_t);
+  auto qs_t = qi.identity ? q_t : q_t.index_select(0, qi.order);
+  auto dos_t = qi.identity ? dout_t : dout_t.index_select(0, qi.order);
+  torch::Tensor Qt_t = transposed<T>(q_t, qi.identity ? nullptr : order);
+  torch::Tensor dOt_t = transposed<T>(dout_t, qi.identity ? nullptr : order);
   auto lse_s = torch::full({pb.H, ldq}, INFINITY, q_t.options());
   auto delta_s = torch::zeros({pb.H, ldq}, q_t.options());
   lse_s.narrow(1, 0, pb.nq).copy_(lse_pos.index_select(0, qi.order).t());
@@ -257,7 +278,7 @@ std::vector<torch::Tensor> rana_forward(torch::Tensor q, torch::Tensor k, torch:
   AT_DISPATCH_FLOATING_TYPES(q.scalar_type(), "rana_forward", [&] {
     const scalar_t* b = bias.has_value() ? bias->data_ptr<scalar_t>() : nullptr;
     dispatch_dims(pb.dk, pb.dv, [&]<int DK, int DV>() {
-      auto Kt = transposed(k);
+      torch::Tensor Kt = transposed<scalar_t>(k);
       forward_impl<scalar_t, DK, DV>(pb, q.data_ptr<scalar_t>(), Kt.data_ptr<scalar_t>(), v.data_ptr<scalar_t>(), qi, b,
                                      scalar_t(scale), out.data_ptr<scalar_t>(), lse.data_ptr<scalar_t>());
     });

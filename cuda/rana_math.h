@@ -228,19 +228,26 @@ RANA_HD T block_exp(T* __restrict__ s, int n, int nr, T sub) {
 
 // Adds each pixel's relative-position bias to its entries of a block in G rows of logits (row stride sld).
 // Entries of pixel p are ptr[p] - start .. ptr[p+1] - start (ptr: key offsets, or the query CSR); the block
-// covers [start, start + n); dx of pixel p is dx_first + sign * (p - p0).
+// covers [start, start + n), n <= kTile; dx of pixel p is dx_first + sign * (p - p0). The bias is laid out
+// once per block as a vector, then added to every row with whole-vector adds.
 template <typename T, int G>
 RANA_HD void add_block_bias(T* s, int sld, const T* bias, int h, int R, int dy, int64_t p0, int64_t p1,
                             int64_t dx_first, int sign, const int64_t* ptr, int64_t start, int n) {
   if (!bias) return;
+  T bvec[kTile + kLanes];
+  const int nr = round_up(n);
   for (int64_t p = p0; p <= p1; ++p) {
     int64_t a = ptr[p] - start, b = ptr[p + 1] - start;
     if (b <= 0 || a >= n) continue;
     a = a < 0 ? 0 : a;
     b = b > n ? n : b;
     const T bv = bias_at(bias, h, R, dy, int(dx_first + sign * (p - p0)));
-    for (int g = 0; g < G; ++g)
-      for (int64_t j = a; j < b; ++j) s[g * sld + j] += bv;
+    for (int64_t j = a; j < b; ++j) bvec[j] = bv;
+  }
+  for (int j = n; j < nr; ++j) bvec[j] = T(0);
+  for (int g = 0; g < G; ++g) {
+    RANA_SIMD
+    for (int j = 0; j < nr; ++j) s[g * sld + j] += bvec[j];
   }
 }
 
@@ -438,7 +445,15 @@ RANA_HD void backward_dkdv_group_head(const T* const* k_g, const T* const* v_g, 
       const Segment& sg = seg[i];
       weighted_rows_group<T, DV, G>(s + sg.off, kStride, sg.n, dos + (sg.start * H + h) * nv, int64_t(H) * nv, nv,
                                     acc_v);
-      if (dbias_h) {  // ds summed per query pixel of the row: each pixel is one relative offset
+      if (dbias_h) {  // ds summed over the group, then per query pixel of the row (one relative offset each)
+        T tsum[kTile + kLanes];
+        const int nr_seg = round_up(sg.n);
+        RANA_SIMD
+        for (int j = 0; j < nr_seg; ++j) tsum[j] = T(0);
+        for (int gi = 0; gi < G; ++gi) {
+          RANA_SIMD
+          for (int j = 0; j < nr_seg; ++j) tsum[j] += t[gi * kStride + sg.off + j];
+        }
         const int64_t qy = ky - sg.dy;
         for (int64_t p = sg.p0; p <= sg.p1; ++p) {
           int64_t a = q_ptr[p] - sg.start, b = q_ptr[p + 1] - sg.start;
@@ -446,8 +461,7 @@ RANA_HD void backward_dkdv_group_head(const T* const* k_g, const T* const* v_g, 
           a = a < 0 ? 0 : a;
           b = b > sg.n ? sg.n : b;
           T sum = T(0);
-          for (int gi = 0; gi < G; ++gi)
-            for (int64_t j = a; j < b; ++j) sum += t[gi * kStride + sg.off + j];
+          for (int64_t j = a; j < b; ++j) sum += tsum[j];
           const int dx = int(kx - (p - qy * g.Wk));
           dbias_h[(sg.dy + rows.R) * side + (dx + rows.R)] += sum;
         }

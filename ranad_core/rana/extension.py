@@ -65,7 +65,9 @@ def load_cpu_extension():
                     sources=[str(SOURCE_DIR / n) for n in CPU_SOURCES], extra_cflags=flags,
                     extra_include_paths=[str(SOURCE_DIR)], extra_ldflags=["-fopenmp"], verbose=False)
     except Exception as e:  # noqa: BLE001 - any build failure means: use the reference
-        raise BuildUnavailable(f"building the C++ RaNA kernels failed: {str(e).strip().splitlines()[-1]}") from e
+        lines = str(e).strip().splitlines() or ["unknown error"]
+        first_error = next((ln for ln in lines if "error" in ln.lower()), lines[-1])
+        raise BuildUnavailable(f"building the C++ RaNA kernels failed: {first_error.strip()}") from e
 
 
 @lru_cache(maxsize=None)
