@@ -19,7 +19,7 @@ import torch
 
 sys.path.insert(0, os.path.join(os.path.dirname(__file__), ".."))
 from ranad_core.rana import rana, self_attention_layout  # noqa: E402
-from ranad_core.rana.reference import neighbour_pairs  # noqa: E402
+from ranad_core.rana.neighborhood import disc  # noqa: E402
 
 
 def problem(size: int, heads: int, dim: int, seed: int = 0):
@@ -32,11 +32,18 @@ def problem(size: int, heads: int, dim: int, seed: int = 0):
 
 
 def pairs_of(offsets, size, radius) -> int:
-    qp, ko, ks = self_attention_layout(offsets, size, size)
-    total = 0
-    for i0 in range(0, qp.shape[0], 1 << 16):
-        total += neighbour_pairs(qp[i0:i0 + (1 << 16)], ko, ks, radius)[0].numel()
-    return total
+    """Query-key pairs of the self-attention layout, counted per disc row without materialising them."""
+    d = disc(radius)
+    counts = (offsets[1:] - offsets[:-1]).reshape(size, size)
+    ys, xs = torch.meshgrid(torch.arange(size), torch.arange(size), indexing="ij")
+    keys = torch.zeros(size, size, dtype=torch.int64)
+    for dy, dx0, dx1 in zip(d.dy, d.dx0, d.dx1):
+        py = ys + dy
+        a, b = (xs + dx0).clamp(0, size - 1), (xs + dx1).clamp(0, size - 1)
+        ok = (py >= 0) & (py < size) & (xs + dx1 >= 0) & (xs + dx0 < size)
+        pyc = py.clamp(0, size - 1)
+        keys += torch.where(ok, offsets[pyc * size + b + 1] - offsets[pyc * size + a], 0)
+    return int((counts * keys).sum())
 
 
 def best_of(fn, repeats: int) -> float:
