@@ -268,6 +268,45 @@ struct Segment {
   int64_t p0, p1; // first and last pixel of the row span
 };
 
+// Calls visit(start, n, dy, p0, p1, dx_first) for every block of keys in the disc around (y, x): each disc
+// row's contiguous key range [offsets[p0], offsets[p1 + 1]), cut at tile boundaries; dx_first is the dx of
+// pixel p0 (dx grows with p).
+template <typename F>
+RANA_HD void for_each_key_block(const Grid& g, const DiscRows& rows, int64_t y, int64_t x, F&& visit) {
+  for (int r = 0; r < rows.n; ++r) {
+    int64_t p0, p1;
+    if (!row_span(g, rows, r, y, x, &p0, &p1)) continue;
+    const int dy = rows.dy[r];
+    const int64_t dx_first = p0 - (y + dy) * g.Wk - x;
+    for (int64_t kb = g.offsets[p0], ke = g.offsets[p1 + 1], n; kb < ke; kb += n) {
+      n = tile_block(kb, ke - kb);
+      visit(kb, int(n), dy, p0, p1, dx_first);
+    }
+  }
+}
+
+// The mirror image: calls visit(start, n, dy, p0, p1, dx_first) for every block of queries (sorted by centre
+// pixel, CSR q_ptr) whose disc contains key pixel (ky, kx); a query at qx sees the key at dx = kx - qx, so
+// dx_first is the dx of pixel p0 and dx falls as p grows.
+template <typename F>
+RANA_HD void for_each_query_block(const Grid& g, const DiscRows& rows, const int64_t* q_ptr, int64_t ky, int64_t kx,
+                                  F&& visit) {
+  for (int r = 0; r < rows.n; ++r) {
+    const int dy = rows.dy[r];
+    const int64_t qy = ky - dy;
+    if (qy < 0 || qy >= g.Hk) continue;
+    int64_t a = kx - rows.dx1[r], b = kx - rows.dx0[r];
+    if (a < 0) a = 0;
+    if (b > g.Wk - 1) b = g.Wk - 1;
+    if (a > b) continue;
+    const int64_t p0 = qy * g.Wk + a, p1 = qy * g.Wk + b;
+    for (int64_t qb = q_ptr[p0], qe = q_ptr[p1 + 1], n; qb < qe; qb += n) {
+      n = tile_block(qb, qe - qb);
+      visit(qb, int(n), dy, p0, p1, kx - a);
+    }
+  }
+}
+
 // Forward for G queries centred on pixel (y, x): out_g[g][DV] and lse_g[g] (-inf and zeros when the disc
 // holds no key bins). Kt: tiled transposed keys; v: values [Nk, H, dv]. s: scratch [G][kStride],
 // seg: scratch of kMaxSegments.
@@ -309,20 +348,13 @@ RANA_HD void forward_group_head(const T* const* q_g, const T* __restrict__ Kt, c
                                     int64_t(H) * nv, nv, acc);
     off = ns = 0;
   };
-  for (int r = 0; r < rows.n; ++r) {
-    int64_t p0, p1;
-    if (!row_span(g, rows, r, y, x, &p0, &p1)) continue;
-    const int dy = rows.dy[r];
-    const int64_t first_dx = p0 - (y + dy) * g.Wk - x;
-    for (int64_t kb = g.offsets[p0], ke = g.offsets[p1 + 1], n; kb < ke; kb += n) {
-      n = tile_block(kb, ke - kb);
-      if (off + round_up(int(n)) > kBuffer || ns == kMaxSegments) flush();
-      dot_group<T, DK, G>(qa, tile_ptr(Kt, kb, h, H, dk), kTile, dk, scale, round_up(int(n)), s + off, kStride);
-      add_block_bias<T, G>(s + off, kStride, bias, h, rows.R, dy, p0, p1, first_dx, 1, g.offsets, kb, int(n));
-      seg[ns++] = Segment{kb, int(n), off, dy, p0, p1};
-      off += int(n);
-    }
-  }
+  for_each_key_block(g, rows, y, x, [&](int64_t kb, int n, int dy, int64_t p0, int64_t p1, int64_t dx_first) {
+    if (off + round_up(n) > kBuffer || ns == kMaxSegments) flush();
+    dot_group<T, DK, G>(qa, tile_ptr(Kt, kb, h, H, dk), kTile, dk, scale, round_up(n), s + off, kStride);
+    add_block_bias<T, G>(s + off, kStride, bias, h, rows.R, dy, p0, p1, dx_first, 1, g.offsets, kb, n);
+    seg[ns++] = Segment{kb, n, off, dy, p0, p1};
+    off += n;
+  });
   flush();
   for (int gi = 0; gi < G; ++gi) {
     if (m[gi] == neg_inf<T>()) {
@@ -376,22 +408,15 @@ RANA_HD void backward_dq_group_head(const T* const* q_g, const T* const* do_g, c
                                     int64_t(H) * nk, nk, acc);
     off = ns = 0;
   };
-  for (int r = 0; r < rows.n; ++r) {
-    int64_t p0, p1;
-    if (!row_span(g, rows, r, y, x, &p0, &p1)) continue;
-    const int dy = rows.dy[r];
-    const int64_t first_dx = p0 - (y + dy) * g.Wk - x;
-    for (int64_t kb = g.offsets[p0], ke = g.offsets[p1 + 1], n; kb < ke; kb += n) {
-      n = tile_block(kb, ke - kb);
-      if (off + round_up(int(n)) > kBuffer || ns == kMaxSegments) flush();
-      const int nr = round_up(int(n));
-      dot_group<T, DK, G>(qa, tile_ptr(Kt, kb, h, H, dk), kTile, dk, scale, nr, s + off, kStride);
-      add_block_bias<T, G>(s + off, kStride, bias, h, rows.R, dy, p0, p1, first_dx, 1, g.offsets, kb, int(n));
-      dot_group<T, DV, G>(da, tile_ptr(Vt, kb, h, H, dv), kTile, dv, T(1), nr, t + off, kStride);
-      seg[ns++] = Segment{kb, int(n), off, dy, p0, p1};
-      off += int(n);
-    }
-  }
+  for_each_key_block(g, rows, y, x, [&](int64_t kb, int n, int dy, int64_t p0, int64_t p1, int64_t dx_first) {
+    if (off + round_up(n) > kBuffer || ns == kMaxSegments) flush();
+    const int nr = round_up(n);
+    dot_group<T, DK, G>(qa, tile_ptr(Kt, kb, h, H, dk), kTile, dk, scale, nr, s + off, kStride);
+    add_block_bias<T, G>(s + off, kStride, bias, h, rows.R, dy, p0, p1, dx_first, 1, g.offsets, kb, n);
+    dot_group<T, DV, G>(da, tile_ptr(Vt, kb, h, H, dv), kTile, dv, T(1), nr, t + off, kStride);
+    seg[ns++] = Segment{kb, n, off, dy, p0, p1};
+    off += n;
+  });
   flush();
   for (int gi = 0; gi < G; ++gi)
     for (int c = 0; c < nk; ++c) dq_g[gi][c] = acc[gi][c];
@@ -477,31 +502,20 @@ RANA_HD void backward_dkdv_group_head(const T* const* k_g, const T* const* v_g, 
                                     int64_t(H) * nk, nk, acc_k);
     off = ns = 0;
   };
-  for (int r = 0; r < rows.n; ++r) {
-    // queries of the row at qy = ky - dy see these keys at offset (dy, kx - qx): mirror the span
-    const int dy = rows.dy[r];
-    const int64_t qy = ky - dy;
-    if (qy < 0 || qy >= g.Hk) continue;
-    int64_t a = kx - rows.dx1[r], b = kx - rows.dx0[r];
-    if (a < 0) a = 0;
-    if (b > g.Wk - 1) b = g.Wk - 1;
-    if (a > b) continue;
-    const int64_t p0 = qy * g.Wk + a, p1 = qy * g.Wk + b;
-    for (int64_t qb = q_ptr[p0], qe = q_ptr[p1 + 1], n; qb < qe; qb += n) {
-      n = tile_block(qb, qe - qb);
-      if (off + round_up(int(n)) > kBuffer || ns == kMaxSegments) flush();
-      const int nr = round_up(int(n));
-      dot_group<T, DK, G>(ka, tile_ptr(Qt, qb, h, H, dk), kTile, dk, scale, nr, s + off, kStride);
-      add_block_bias<T, G>(s + off, kStride, bias, h, rows.R, dy, p0, p1, kx - a, -1, q_ptr, qb, int(n));
-      dot_group<T, DV, G>(va, tile_ptr(dOt, qb, h, H, dv), kTile, dv, T(1), nr, t + off, kStride);
-      for (int j = 0; j < nr; ++j) {  // padded operands: lse +inf, delta 0 beyond the last query
-        L[off + j] = lse_h[qb + j];
-        D[off + j] = delta_h[qb + j];
-      }
-      seg[ns++] = Segment{qb, int(n), off, dy, p0, p1};
-      off += int(n);
+  for_each_query_block(g, rows, q_ptr, ky, kx, [&](int64_t qb, int n, int dy, int64_t p0, int64_t p1,
+                                                   int64_t dx_first) {
+    if (off + round_up(n) > kBuffer || ns == kMaxSegments) flush();
+    const int nr = round_up(n);
+    dot_group<T, DK, G>(ka, tile_ptr(Qt, qb, h, H, dk), kTile, dk, scale, nr, s + off, kStride);
+    add_block_bias<T, G>(s + off, kStride, bias, h, rows.R, dy, p0, p1, dx_first, -1, q_ptr, qb, n);
+    dot_group<T, DV, G>(va, tile_ptr(dOt, qb, h, H, dv), kTile, dv, T(1), nr, t + off, kStride);
+    for (int j = 0; j < nr; ++j) {  // padded operands: lse +inf, delta 0 beyond the last query
+      L[off + j] = lse_h[qb + j];
+      D[off + j] = delta_h[qb + j];
     }
-  }
+    seg[ns++] = Segment{qb, n, off, dy, p0, p1};
+    off += n;
+  });
   flush();
   for (int gi = 0; gi < G; ++gi) {
     for (int c = 0; c < nk; ++c) dk_g[gi][c] = acc_k[gi][c];
