@@ -20,7 +20,7 @@ from .header import ExrLayout, deep_state_code, parse_layout, read_file_bytes
 IoMode = Literal["auto", "oiio", "fast"]
 _io_mode: IoMode = "auto"
 
-__all__ = ["read_deep", "write_deep", "read_layout", "set_io_mode", "get_io_mode", "DeepImage", "ExrLayout"]
+__all__ = ["read_deep", "read_part", "write_deep", "read_layout", "set_io_mode", "get_io_mode", "DeepImage", "ExrLayout"]
 
 
 def set_io_mode(mode: IoMode) -> None:
@@ -71,9 +71,14 @@ def read_deep(path: str | os.PathLike, part: int | str | None = None, channels: 
     ``part``: index or name (default: the first deep part); ``channels``: read only these (all by default).
     """
     path = os.fspath(path)
-    mode = io or _io_mode
     layout, buf = read_layout(path)
-    index = resolve_part(layout, part, path)
+    return read_part(path, layout, buf, resolve_part(layout, part, path), channels, io)
+
+
+def read_part(path: str, layout: ExrLayout, buf: bytes, index: int, channels: list[str] | None = None,
+              io: IoMode | None = None) -> DeepImage:
+    """Read deep part ``index`` of a file whose layout and bytes :func:`read_layout` returned (no re-read)."""
+    mode = io or _io_mode
     header = layout.parts[index]
     oiio_io.validate(path, index, header)
     if mode != "oiio":

@@ -12,7 +12,7 @@ from typing import Any
 import numpy as np
 
 from ..deep import DeepImage
-from . import read_deep, read_layout
+from . import read_layout, read_part
 from .header import COMPRESSION_NAMES, DEEP_IMAGE_STATES
 
 #: id channel names preferred as "the" object id, in order; otherwise the first uint channel
@@ -64,7 +64,7 @@ def _deep_stats(image: DeepImage) -> dict[str, Any]:
 def describe(path: str | os.PathLike, stats: bool = True) -> dict[str, Any]:
     """A JSON-ready description of every part of an EXR file (deep statistics for deep parts)."""
     path = os.fspath(path)
-    layout, _ = read_layout(path)
+    layout, buf = read_layout(path)
     out: dict[str, Any] = {"file": path, "file_size": os.path.getsize(path), "multipart": layout.multipart,
                            "parts": []}
     for i, part in enumerate(layout.parts):
@@ -90,7 +90,7 @@ def describe(path: str | os.PathLike, stats: bool = True) -> dict[str, Any]:
         if tiled and part.tiles:
             info["tiles"] = list(part.tiles[:2])
         if deep and stats:
-            info.update(_deep_stats(read_deep(path, part=i)))
+            info.update(_deep_stats(read_part(path, layout, buf, i)))
         out["parts"].append(info)
     return out
 
