@@ -26,7 +26,7 @@ using rana::Grid;
 constexpr int64_t kKeyPixelsPerChunk = 256;
 
 struct Problem {
-  int64_t nq, nk, H, dk, dv;
+  int64_t nq, H, dk, dv;
   Grid grid;
   DiscRows rows;
 };
@@ -52,7 +52,6 @@ Problem make_problem(const torch::Tensor& q, const torch::Tensor& k, const torch
                      const torch::Tensor& rows_dx0, const torch::Tensor& rows_dx1, int64_t R) {
   Problem pb;
   pb.nq = q.size(0);
-  pb.nk = k.size(0);
   pb.H = q.size(1);
   pb.dk = q.size(2);
   pb.dv = v.size(2);

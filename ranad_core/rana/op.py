@@ -62,7 +62,7 @@ def rana_bwd(dout: torch.Tensor, q: torch.Tensor, k: torch.Tensor, v: torch.Tens
 
 @rana_bwd.register_fake
 def _(dout, q, k, v, out, lse, q_pixels, k_offsets, hk, wk, radius, bias, need_dbias):
-    side = 2 * int(math.floor(radius)) + 1
+    side = disc(radius).side
     db = q.new_empty((q.shape[1], side, side)) if need_dbias else q.new_empty((0,))
     return torch.empty_like(q), torch.empty_like(k), torch.empty_like(v), db
 
@@ -118,10 +118,10 @@ def rana(q: torch.Tensor, k: torch.Tensor, v: torch.Tensor, q_pixels: torch.Tens
     relative-position bias added to the logits. Returns out [Nq, heads, dv] with scale 1/sqrt(d); a query
     whose disc holds no key bins gets zeros.
     """
-    hk, wk = _validate(q, k, v, q_pixels, k_offsets, k_size, radius, bias)
-    use_cpu = backend == "cpu" or (backend == "auto" and q.device.type == "cpu" and cpu_extension_or_none())
     if backend not in ("auto", "cpu", "reference"):
         raise ValueError(f"unknown RaNA backend {backend!r}")
+    hk, wk = _validate(q, k, v, q_pixels, k_offsets, k_size, radius, bias)
+    use_cpu = backend == "cpu" or (backend == "auto" and q.device.type == "cpu" and cpu_extension_or_none())
     if not use_cpu:
         return rana_reference(q, k, v, q_pixels, k_offsets, (hk, wk), radius, bias)
     q, k, v = q.contiguous(), k.contiguous(), v.contiguous()
