@@ -1,35 +1,44 @@
 // CPU (OpenMP) kernels of the RaNA operator and their torch bindings.
 //
-// Work is organised by pixel: the queries (or keys) of one pixel share their neighbourhood, so they are
-// processed together in groups of up to rana::kGroup, and every loaded key (or query) serves the group.
-// Forward: online softmax over the disc row blocks (rana_math.h), saving the log-sum-exp; keys are read
-// transposed so each block's logits are broadcast-FMAs over consecutive keys.
+// Work is organised in blocks (rana_math.h): up to L entries of one grid row on at most kMaxSpan + 1 consecutive
+// pixels, one per SIMD lane (L = 16 floats, 8 doubles), so every key visited serves L queries at once.
+// Forward: online softmax per query block, saving the log-sum-exp.
 // Backward (FlashAttention-2 style, probabilities recomputed from the log-sum-exp):
-//   pass 1, per group of queries: dQ;
-//   pass 2, per chunk of key pixels: dK and dV of every key bin from its reverse neighbourhood (queries
-//           sorted by centre pixel and transposed), plus the bias gradient of the chunk.
-// Every output element is summed by one task in a fixed order and the bias gradient is reduced over a
-// fixed number of chunks in order, so results do not depend on the number of threads or the schedule.
+//   pass 1, per query block: dQ;
+//   pass 2, per key block: dK and dV from the reverse neighbourhood (queries sorted by centre pixel), plus the
+//           bias gradient, summed per fixed chunk of key blocks.
+// Every output element is summed by one task in a fixed order and the bias gradient is reduced over the chunks
+// in order, so results do not depend on the number of threads or the schedule.
+// Head dimensions are compiled in (d in 8, 16, 32, 64 for q/k; 3, 8, 16, 32, 64 for v): other sizes are padded
+// with zero channels, which changes no logit and no output.
 #include <torch/extension.h>
 
 #include <omp.h>
 
+#include <type_traits>
 #include <vector>
 
 #include "rana_math.h"
 
 namespace {
 
+using rana::Block;
 using rana::DiscRows;
 using rana::Grid;
 
-constexpr int64_t kKeyPixelsPerChunk = 256;
-
-struct Problem {
-  int64_t nq, H, dk, dv;
-  Grid grid;
-  DiscRows rows;
+template <typename T>
+struct VecFor;
+template <>
+struct VecFor<float> {
+  using V = rana::f32x16;
 };
+template <>
+struct VecFor<double> {
+  using V = rana::f64x8;
+};
+
+constexpr int kBuffer = 256;               // keys (or queries) buffered per softmax step
+constexpr int64_t kBlocksPerChunk = 64;    // key blocks per bias-gradient partial sum
 
 void check_inputs(const torch::Tensor& q, const torch::Tensor& k, const torch::Tensor& v,
                   const torch::Tensor& q_pixels, const torch::Tensor& k_offsets, int64_t Hk, int64_t Wk) {
@@ -47,45 +56,60 @@ void check_inputs(const torch::Tensor& q, const torch::Tensor& k, const torch::T
     TORCH_CHECK(t->is_contiguous() && t->device().is_cpu(), "inputs must be contiguous CPU tensors");
 }
 
-Problem make_problem(const torch::Tensor& q, const torch::Tensor& k, const torch::Tensor& v,
-                     const torch::Tensor& k_offsets, int64_t Hk, int64_t Wk, const torch::Tensor& rows_dy,
-                     const torch::Tensor& rows_dx0, const torch::Tensor& rows_dx1, int64_t R) {
-  Problem pb;
-  pb.nq = q.size(0);
-  pb.H = q.size(1);
-  pb.dk = q.size(2);
-  pb.dv = v.size(2);
-  pb.grid = Grid{k_offsets.data_ptr<int64_t>(), Hk, Wk};
-  pb.rows = DiscRows{int(rows_dy.numel()), int(R), rows_dy.data_ptr<int32_t>(), rows_dx0.data_ptr<int32_t>(),
-                     rows_dx1.data_ptr<int32_t>()};
-  return pb;
-}
-
 int threads() { return at::get_num_threads(); }
 
-// [N, H, d] -> [N / kTile + 1, H, d, kTile] (zero padding): the tiled transposed layout of rana_math.h.
-// Row j of the result is row order[j] of x when order is given (queries in pixel order). One parallel pass:
-// torch's generic strided copy took ~60 ms per operand on a 256x256 layout.
-template <typename T>
-torch::Tensor transposed(const torch::Tensor& x, const int64_t* order = nullptr) {
-  const int64_t n = x.size(0), H = x.size(1), d = x.size(2), tiles = n / rana::kTile + 1;
-  auto out = torch::empty({tiles, H, d, rana::kTile}, x.options());
-  const T* src = x.data_ptr<T>();
-  T* dst = out.data_ptr<T>();
-#pragma omp parallel for schedule(static) num_threads(threads())
-  for (int64_t tile = 0; tile < tiles; ++tile) {
-    T* block = dst + tile * H * d * rana::kTile;
-    for (int64_t jj = 0; jj < rana::kTile; ++jj) {
-      const int64_t j = tile * rana::kTile + jj;
-      if (j >= n) {
-        for (int64_t e = 0; e < H * d; ++e) block[e * rana::kTile + jj] = T(0);
-        continue;
+// Compiled head dimensions: the smallest that holds d. float (the model) gets the sizes it uses; double is for
+// gradient checks only and gets few sizes, to keep the first build short.
+int64_t padded_dk(int64_t d, bool is_double) {
+  if (is_double) return d <= 16 ? 16 : 64;
+  return d <= 8 ? 8 : d <= 16 ? 16 : d <= 32 ? 32 : 64;
+}
+int64_t padded_dv(int64_t d, bool is_double) {
+  if (is_double) return d <= 3 ? 3 : d <= 16 ? 16 : 64;
+  return d <= 3 ? 3 : d <= 8 ? 8 : d <= 16 ? 16 : d <= 32 ? 32 : 64;
+}
+
+torch::Tensor pad_channels(const torch::Tensor& x, int64_t d) {
+  if (x.size(2) == d) return x;
+  return torch::constant_pad_nd(x, {0, d - x.size(2)}, 0).contiguous();
+}
+
+torch::Tensor unpad_channels(const torch::Tensor& x, int64_t d) {
+  return x.size(2) == d ? x : x.narrow(2, 0, d).contiguous();
+}
+
+// One lane per block (V = T): the bodies exactly as a GPU thread runs them, compiled for d <= 16 only (tests).
+constexpr int64_t kScalarLaneDim = 16;
+
+// Calls f.template operator()<DK, DV>() with the compiled dimensions of scalar type T (see padded_dk/dv).
+template <typename T, typename F>
+void dispatch_dims(int64_t dk, int64_t dv, F&& f) {
+  if constexpr (std::is_same_v<T, double>) {
+    auto with_dv = [&]<int DK>() {
+      switch (dv) {
+        case 3: return f.template operator()<DK, 3>();
+        case 16: return f.template operator()<DK, 16>();
+        default: return f.template operator()<DK, 64>();
       }
-      const T* row = src + (order ? order[j] : j) * H * d;
-      for (int64_t e = 0; e < H * d; ++e) block[e * rana::kTile + jj] = row[e];
+    };
+    return dk == 16 ? with_dv.template operator()<16>() : with_dv.template operator()<64>();
+  } else {
+    auto with_dv = [&]<int DK>() {
+      switch (dv) {
+        case 3: return f.template operator()<DK, 3>();
+        case 8: return f.template operator()<DK, 8>();
+        case 16: return f.template operator()<DK, 16>();
+        case 32: return f.template operator()<DK, 32>();
+        default: return f.template operator()<DK, 64>();
+      }
+    };
+    switch (dk) {
+      case 8: return with_dv.template operator()<8>();
+      case 16: return with_dv.template operator()<16>();
+      case 32: return with_dv.template operator()<32>();
+      default: return with_dv.template operator()<64>();
     }
   }
-  return out;
 }
 
 // Queries sorted by centre pixel: CSR over the key grid (ptr[p]..ptr[p+1] index into order), ascending query id
@@ -101,7 +125,11 @@ QueryIndex index_queries(const torch::Tensor& qpix_t, const Grid& g) {
   const int64_t* qpix = qpix_t.data_ptr<int64_t>();
   QueryIndex qi{std::vector<int64_t>(npix + 1, 0), torch::empty({nq}, qpix_t.options()), true};
   int64_t* order = qi.order.data_ptr<int64_t>();
-  for (int64_t i = 0; i < nq; ++i) qi.ptr[qpix[2 * i] * g.Wk + qpix[2 * i + 1] + 1]++;
+  for (int64_t i = 0; i < nq; ++i) {
+    TORCH_CHECK(qpix[2 * i] >= 0 && qpix[2 * i] < g.Hk && qpix[2 * i + 1] >= 0 && qpix[2 * i + 1] < g.Wk,
+                "q_pixels outside the key grid");
+    qi.ptr[qpix[2 * i] * g.Wk + qpix[2 * i + 1] + 1]++;
+  }
   for (int64_t p = 0; p < npix; ++p) qi.ptr[p + 1] += qi.ptr[p];
   std::vector<int64_t> fill(qi.ptr.begin(), qi.ptr.end() - 1);
   for (int64_t i = 0; i < nq; ++i) order[fill[qpix[2 * i] * g.Wk + qpix[2 * i + 1]]++] = i;
@@ -109,142 +137,153 @@ QueryIndex index_queries(const torch::Tensor& qpix_t, const Grid& g) {
   return qi;
 }
 
-// Runs body(p, first, G) for every pixel p holding entries ptr[p]..ptr[p+1], in groups of at most kGroup
-// consecutive entries, pixels spread over the threads.
-template <typename F>
-void for_each_group(const int64_t* ptr, int64_t npix, F&& body) {
-#pragma omp parallel for schedule(dynamic, 16) num_threads(threads())
-  for (int64_t p = 0; p < npix; ++p) {
-    for (int64_t t = ptr[p]; t < ptr[p + 1]; t += rana::kGroup) {
-      const int n = int(std::min<int64_t>(rana::kGroup, ptr[p + 1] - t));
-      body(p, t, n);
+// A block before its lanes are filled in: entries first..first+n-1 of a CSR, on grid row y, pixels x0..x0+span.
+struct BlockSpan {
+  int64_t first, y, x0;
+  int32_t n, span;
+};
+
+// Cuts the entries of a CSR over the grid (ptr [Hk*Wk+1]) into blocks, row by row, in entry order.
+std::vector<BlockSpan> make_blocks(const int64_t* ptr, int64_t Hk, int64_t Wk, int L) {
+  std::vector<std::vector<BlockSpan>> per_row(Hk);
+#pragma omp parallel for schedule(static) num_threads(threads())
+  for (int64_t y = 0; y < Hk; ++y) {
+    const int64_t* rp = ptr + y * Wk;
+    auto& out = per_row[y];
+    int64_t x = 0;
+    for (int64_t e = rp[0]; e < rp[Wk];) {
+      while (rp[x + 1] <= e) ++x;  // pixel of entry e
+      const int64_t xl = std::min(Wk - 1, x + rana::kMaxSpan);
+      const int64_t stop = std::min(e + L, rp[xl + 1]);
+      int64_t xe = x;
+      while (rp[xe + 1] < stop) ++xe;  // pixel of entry stop - 1
+      out.push_back(BlockSpan{e, y, x, int32_t(stop - e), int32_t(xe - x)});
+      e = stop;
     }
   }
+  std::vector<BlockSpan> all;
+  for (auto& r : per_row) all.insert(all.end(), r.begin(), r.end());
+  return all;
 }
 
-template <typename T, int DK, int DV>
-void forward_impl(const Problem& pb, const T* q, const T* Kt, const T* v, const QueryIndex& qi, const T* bias,
-                  T scale, T* out, T* lse) {
-  const int H = int(pb.H), dk = int(pb.dk), dv = int(pb.dv);
-  const Grid& g = pb.grid;
-  const int64_t* order = qi.order.data_ptr<int64_t>();
-  for_each_group(qi.ptr.data(), g.Hk * g.Wk, [&](int64_t p, int64_t first, int n) {
-    alignas(64) T s[rana::kGroup * rana::kStride];
-    rana::Segment seg[rana::kMaxSegments];
-    rana::with_group_size(n, [&]<int G>() {
-      const T* q_g[G];
-      T* out_g[G];
-      T lse_g[G];
-      for (int h = 0; h < H; ++h) {
-        for (int gi = 0; gi < G; ++gi) {
-          q_g[gi] = q + (order[first + gi] * H + h) * dk;
-          out_g[gi] = out + (order[first + gi] * H + h) * dv;
-        }
-        rana::forward_group_head<T, DK, DV, G>(q_g, Kt, v, g, pb.rows, bias, p / g.Wk, p % g.Wk, h, H, dk, dv, scale,
-                                               out_g, lse_g, s, seg);
-        for (int gi = 0; gi < G; ++gi) lse[order[first + gi] * H + h] = lse_g[gi];
-      }
-    });
-  });
+// The lanes of a block: operand row (entry, or order[entry] when the entries are sorted queries) and pixel.
+template <int L>
+Block<L> fill_block(const BlockSpan& s, const int64_t* ptr, int64_t Wk, const int64_t* order) {
+  Block<L> b;
+  b.y = s.y;
+  b.x0 = s.x0;
+  b.span = s.span;
+  b.n = s.n;
+  const int64_t* rp = ptr + s.y * Wk + s.x0;
+  int32_t x = 0;
+  for (int i = 0; i < s.n; ++i) {
+    const int64_t e = s.first + i;
+    while (rp[x + 1] <= e) ++x;
+    b.id[i] = order ? order[e] : e;
+    b.rel[i] = x;
+  }
+  for (int i = s.n; i < L; ++i) {
+    b.id[i] = 0;
+    b.rel[i] = 0;
+  }
+  return b;
 }
 
-template <typename T, int DK, int DV>
-void backward_impl(const Problem& pb, const torch::Tensor& q_t, const torch::Tensor& k_t, const torch::Tensor& v_t,
-                   const torch::Tensor& dout_t, const torch::Tensor& lse_t, const torch::Tensor& delta_t,
-                   const QueryIndex& qi, const T* bias, T scale, T* dq, T* dk_out, T* dv_out, T* dbias) {
-  const int H = int(pb.H), dk = int(pb.dk), dv = int(pb.dv);
-  const Grid& g = pb.grid;
-  const int64_t npix = g.Hk * g.Wk;
-  const int64_t* order = qi.order.data_ptr<int64_t>();
+template <typename T>
+struct Tables {
+  std::vector<T> tab;
+  rana::Op<T> op;
+};
+
+template <typename T>
+Tables<T> make_op(int64_t H, int64_t dk, int64_t dv, const torch::Tensor& k_offsets, int64_t Hk, int64_t Wk,
+                  const torch::Tensor& rows_dy, const torch::Tensor& rows_dx0, const torch::Tensor& rows_dx1,
+                  int64_t R, const T* bias, T scale) {
+  Tables<T> t;
+  const DiscRows rows{int(rows_dy.numel()), int(R), rows_dy.data_ptr<int32_t>(), rows_dx0.data_ptr<int32_t>(),
+                      rows_dx1.data_ptr<int32_t>()};
+  TORCH_CHECK(rows.n > 0, "empty disc");
+  t.tab.resize((H * rows.n + 1) * rana::table_width(rows.R));
+  rana::fill_table(rows, bias, int(H), t.tab.data());
+  t.op = rana::Op<T>{Grid{k_offsets.data_ptr<int64_t>(), Hk, Wk}, rows, t.tab.data(), int(H), int(dk), int(dv),
+                     scale};
+  return t;
+}
+
+template <typename T, typename V, int DK, int DV>
+void forward_impl(const rana::Op<T>& op, const T* q, const T* k, const T* v, const QueryIndex& qi, T* out, T* lse) {
+  constexpr int L = rana::Lanes<V>::L;
+  const auto blocks = make_blocks(qi.ptr.data(), op.g.Hk, op.g.Wk, L);
+  const int64_t* order = qi.identity ? nullptr : qi.order.data_ptr<int64_t>();
+#pragma omp parallel for schedule(dynamic, 16) num_threads(threads())
+  for (size_t i = 0; i < blocks.size(); ++i) {
+    const Block<L> b = fill_block<L>(blocks[i], qi.ptr.data(), op.g.Wk, order);
+    const auto lt = rana::lane_table(b, op.rows, op.H, 1);
+    for (int h = 0; h < op.H; ++h) rana::forward_block_head<V, DK, DV, kBuffer>(op, b, lt, h, q, k, v, out, lse);
+  }
+}
+
+template <typename T, typename V, int DK, int DV>
+void backward_impl(const rana::Op<T>& op, const torch::Tensor& q_t, const torch::Tensor& k_t,
+                   const torch::Tensor& v_t, const torch::Tensor& dout_t, const torch::Tensor& lse_t,
+                   const torch::Tensor& delta_t, const QueryIndex& qi, T* dq, T* dk_out, T* dv_out, T* dbias) {
+  constexpr int L = rana::Lanes<V>::L;
+  const int H = op.H;
   // queries with an empty disc: lse +inf gives them probability 0 everywhere below
   auto lse_pos = torch::where(torch::isinf(lse_t), torch::full_like(lse_t, INFINITY), lse_t).contiguous();
-  const T* q = q_t.data_ptr<T>();
   const T* k = k_t.data_ptr<T>();
   const T* v = v_t.data_ptr<T>();
-  const T* dout = dout_t.data_ptr<T>();
-  const T* lse = lse_pos.data_ptr<T>();
-  const T* delta = delta_t.data_ptr<T>();
 
-  // pass 1: dQ, per group of queries of one pixel
+  // pass 1: dQ per query block
   {
-    torch::Tensor Kt_t = transposed<T>(k_t), Vt_t = transposed<T>(v_t);
-    const T* Kt = Kt_t.data_ptr<T>();
-    const T* Vt = Vt_t.data_ptr<T>();
-    for_each_group(qi.ptr.data(), npix, [&](int64_t p, int64_t first, int n) {
-      alignas(64) T s[rana::kGroup * rana::kStride];
-      alignas(64) T t[rana::kGroup * rana::kStride];
-      rana::Segment seg[rana::kMaxSegments];
-      rana::with_group_size(n, [&]<int G>() {
-        const T *q_g[G], *do_g[G];
-        T* dq_g[G];
-        T lse_g[G], delta_g[G];
-        for (int h = 0; h < H; ++h) {
-          for (int gi = 0; gi < G; ++gi) {
-            const int64_t i = order[first + gi];
-            q_g[gi] = q + (i * H + h) * dk;
-            do_g[gi] = dout + (i * H + h) * dv;
-            dq_g[gi] = dq + (i * H + h) * dk;
-            lse_g[gi] = lse[i * H + h];
-            delta_g[gi] = delta[i * H + h];
-          }
-          rana::backward_dq_group_head<T, DK, DV, G>(q_g, do_g, lse_g, delta_g, Kt, Vt, k, g, pb.rows, bias, p / g.Wk,
-                                                     p % g.Wk, h, H, dk, dv, scale, dq_g, s, t, seg);
-        }
-      });
-    });
+    const auto blocks = make_blocks(qi.ptr.data(), op.g.Hk, op.g.Wk, L);
+    const int64_t* order = qi.identity ? nullptr : qi.order.data_ptr<int64_t>();
+    const T* q = q_t.data_ptr<T>();
+    const T* dout = dout_t.data_ptr<T>();
+    const T* lse = lse_pos.data_ptr<T>();
+    const T* delta = delta_t.data_ptr<T>();
+#pragma omp parallel for schedule(dynamic, 16) num_threads(threads())
+    for (size_t i = 0; i < blocks.size(); ++i) {
+      const Block<L> b = fill_block<L>(blocks[i], qi.ptr.data(), op.g.Wk, order);
+      const auto lt = rana::lane_table(b, op.rows, H, 1);
+      for (int h = 0; h < H; ++h)
+        rana::backward_dq_block_head<V, DK, DV, kBuffer>(op, b, lt, h, q, dout, lse, delta, k, v, dq);
+    }
   }
 
-  // pass 2: dK, dV per group of keys of one pixel; the queries' operands in pixel order
-  const int64_t ldq = pb.nq + rana::kLanes;
-  auto qs_t = qi.identity ? q_t : q_t.index_select(0, qi.order);
-  auto dos_t = qi.identity ? dout_t : dout_t.index_select(0, qi.order);
-  torch::Tensor Qt_t = transposed<T>(q_t, qi.identity ? nullptr : order);
-  torch::Tensor dOt_t = transposed<T>(dout_t, qi.identity ? nullptr : order);
-  auto lse_s = torch::full({pb.H, ldq}, INFINITY, q_t.options());
-  auto delta_s = torch::zeros({pb.H, ldq}, q_t.options());
-  lse_s.narrow(1, 0, pb.nq).copy_(lse_pos.index_select(0, qi.order).t());
-  delta_s.narrow(1, 0, pb.nq).copy_(delta_t.index_select(0, qi.order).t());
+  // pass 2: dK, dV per key block; the queries' operands in pixel order
+  auto sorted = [&](const torch::Tensor& x) -> torch::Tensor { return qi.identity ? x : x.index_select(0, qi.order).contiguous(); };
+  const torch::Tensor qs_t = sorted(q_t), dos_t = sorted(dout_t), lse_s_t = sorted(lse_pos), delta_s_t = sorted(delta_t);
   const T* qs = qs_t.data_ptr<T>();
   const T* dos = dos_t.data_ptr<T>();
-  const T* Qt = Qt_t.data_ptr<T>();
-  const T* dOt = dOt_t.data_ptr<T>();
-  const T* lse_sp = lse_s.data_ptr<T>();
-  const T* delta_sp = delta_s.data_ptr<T>();
-  // the bias gradient is summed per chunk of key pixels, then over chunks in order (thread-count independent)
-  const int side = 2 * pb.rows.R + 1;
-  const int64_t bias_size = int64_t(H) * side * side;
-  const int64_t nchunks = (npix + kKeyPixelsPerChunk - 1) / kKeyPixelsPerChunk;
+  const T* lse_s = lse_s_t.data_ptr<T>();
+  const T* delta_s = delta_s_t.data_ptr<T>();
+  const auto blocks = make_blocks(op.g.offsets, op.g.Hk, op.g.Wk, L);
+  const int n_rows = op.rows.n, R = op.rows.R, side = 2 * R + 1;
+  const int tw = rana::table_width(R), o = rana::table_centre(R);
+  const int64_t bias_size = int64_t(H) * side * side, lane_size = int64_t(L) * n_rows * tw;
+  const int64_t nchunks = (int64_t(blocks.size()) + kBlocksPerChunk - 1) / kBlocksPerChunk;
   std::vector<T> partial(dbias ? nchunks * bias_size : 0, T(0));
 #pragma omp parallel for schedule(dynamic, 1) num_threads(threads())
   for (int64_t c = 0; c < nchunks; ++c) {
-    alignas(64) T s[rana::kGroup * rana::kStride];
-    alignas(64) T t[rana::kGroup * rana::kStride];
-    alignas(64) T L[rana::kStride];
-    alignas(64) T D[rana::kStride];
-    rana::Segment seg[rana::kMaxSegments];
-    T* part = dbias ? partial.data() + c * bias_size : nullptr;
-    const int64_t pe = std::min(npix, (c + 1) * kKeyPixelsPerChunk);
-    for (int64_t p = c * kKeyPixelsPerChunk; p < pe; ++p) {
-      for (int64_t first = g.offsets[p]; first < g.offsets[p + 1]; first += rana::kGroup) {
-        const int n = int(std::min<int64_t>(rana::kGroup, g.offsets[p + 1] - first));
-        rana::with_group_size(n, [&]<int G>() {
-          const T *k_g[G], *v_g[G];
-          T *dk_g[G], *dv_g[G];
-          for (int h = 0; h < H; ++h) {
-            for (int gi = 0; gi < G; ++gi) {
-              const int64_t j = first + gi;
-              k_g[gi] = k + (j * H + h) * dk;
-              v_g[gi] = v + (j * H + h) * dv;
-              dk_g[gi] = dk_out + (j * H + h) * dk;
-              dv_g[gi] = dv_out + (j * H + h) * dv;
-            }
-            rana::backward_dkdv_group_head<T, DK, DV, G>(
-                k_g, v_g, Qt, dOt, qs, dos, lse_sp + h * ldq, delta_sp + h * ldq, qi.ptr.data(), g, pb.rows, bias,
-                p / g.Wk, p % g.Wk, h, H, dk, dv, scale, dk_g, dv_g, part ? part + int64_t(h) * side * side : nullptr,
-                s, t, L, D, seg);
-          }
-        });
-      }
+    std::vector<T> lanes(dbias ? H * lane_size : 0, T(0));
+    const int64_t be = std::min<int64_t>(blocks.size(), (c + 1) * kBlocksPerChunk);
+    for (int64_t i = c * kBlocksPerChunk; i < be; ++i) {
+      const Block<L> b = fill_block<L>(blocks[i], op.g.offsets, op.g.Wk, nullptr);
+      const auto lt = rana::lane_table(b, op.rows, H, -1);
+      for (int h = 0; h < H; ++h)
+        rana::backward_dkdv_block_head<V, DK, DV, kBuffer>(op, b, lt, h, qi.ptr.data(), qs, dos, lse_s, delta_s, k,
+                                                           v, dk_out, dv_out,
+                                                           dbias ? lanes.data() + h * lane_size : nullptr);
+    }
+    if (dbias) {  // per-lane tables -> this chunk's [H, side, side], in a fixed order
+      T* part = partial.data() + c * bias_size;
+      for (int h = 0; h < H; ++h)
+        for (int u = 0; u < L; ++u)
+          for (int r = 0; r < n_rows; ++r)
+            for (int dx = op.rows.dx0[r]; dx <= op.rows.dx1[r]; ++dx)
+              part[(int64_t(h) * side + op.rows.dy[r] + R) * side + dx + R] +=
+                  lanes[h * lane_size + (int64_t(u) * n_rows + r) * tw + o + dx];
     }
   }
   if (dbias) {
@@ -254,65 +293,88 @@ void backward_impl(const Problem& pb, const torch::Tensor& q_t, const torch::Ten
   }
 }
 
-// Calls f.template operator()<DK, DV>() with compile-time head dimensions for the common sizes
-// (so the inner loops are fully unrolled and vectorised) and 0 (run-time sizes) otherwise.
-template <typename F>
-void dispatch_dims(int64_t dk, int64_t dv, F&& f) {
-  if (dk == 16 && dv == 16) return f.template operator()<16, 16>();
-  if (dk == 8 && dv == 8) return f.template operator()<8, 8>();
-  if (dk == 32 && dv == 32) return f.template operator()<32, 32>();
-  if (dk == 16 && dv == 3) return f.template operator()<16, 3>();
-  return f.template operator()<0, 0>();
-}
-
 std::vector<torch::Tensor> rana_forward(torch::Tensor q, torch::Tensor k, torch::Tensor v, torch::Tensor q_pixels,
                                         torch::Tensor k_offsets, int64_t Hk, int64_t Wk, torch::Tensor rows_dy,
                                         torch::Tensor rows_dx0, torch::Tensor rows_dx1, int64_t R,
-                                        c10::optional<torch::Tensor> bias, double scale) {
+                                        c10::optional<torch::Tensor> bias, double scale, bool scalar_lanes) {
   check_inputs(q, k, v, q_pixels, k_offsets, Hk, Wk);
-  const Problem pb = make_problem(q, k, v, k_offsets, Hk, Wk, rows_dy, rows_dx0, rows_dx1, R);
-  const QueryIndex qi = index_queries(q_pixels, pb.grid);
-  auto out = torch::empty({pb.nq, pb.H, pb.dv}, q.options());
-  auto lse = torch::empty({pb.nq, pb.H}, q.options());
+  const int64_t nq = q.size(0), H = q.size(1), dv = v.size(2);
+  const bool dbl = q.scalar_type() == torch::kDouble;
+  int64_t DKp = padded_dk(q.size(2), dbl), DVp = padded_dv(dv, dbl);
+  if (scalar_lanes) {
+    TORCH_CHECK(q.size(2) <= kScalarLaneDim && dv <= kScalarLaneDim, "scalar lanes: head dimensions up to 16");
+    DKp = DVp = kScalarLaneDim;
+  }
+  const Grid grid{k_offsets.data_ptr<int64_t>(), Hk, Wk};
+  const QueryIndex qi = index_queries(q_pixels, grid);
+  const auto qp = pad_channels(q, DKp), kp = pad_channels(k, DKp), vp = pad_channels(v, DVp);
+  auto out = torch::empty({nq, H, DVp}, q.options());
+  auto lse = torch::empty({nq, H}, q.options());
   AT_DISPATCH_FLOATING_TYPES(q.scalar_type(), "rana_forward", [&] {
     const scalar_t* b = bias.has_value() ? bias->data_ptr<scalar_t>() : nullptr;
-    dispatch_dims(pb.dk, pb.dv, [&]<int DK, int DV>() {
-      torch::Tensor Kt = transposed<scalar_t>(k);
-      forward_impl<scalar_t, DK, DV>(pb, q.data_ptr<scalar_t>(), Kt.data_ptr<scalar_t>(), v.data_ptr<scalar_t>(), qi, b,
-                                     scalar_t(scale), out.data_ptr<scalar_t>(), lse.data_ptr<scalar_t>());
-    });
+    const auto t = make_op<scalar_t>(H, DKp, DVp, k_offsets, Hk, Wk, rows_dy, rows_dx0, rows_dx1, R, b,
+                                     scalar_t(scale));
+    auto run = [&]<typename V, int DK, int DV>() {
+      forward_impl<scalar_t, V, DK, DV>(t.op, qp.data_ptr<scalar_t>(), kp.data_ptr<scalar_t>(),
+                                        vp.data_ptr<scalar_t>(), qi, out.data_ptr<scalar_t>(),
+                                        lse.data_ptr<scalar_t>());
+    };
+    if (scalar_lanes)
+      run.template operator()<scalar_t, kScalarLaneDim, kScalarLaneDim>();
+    else
+      dispatch_dims<scalar_t>(DKp, DVp, [&]<int DK, int DV>() {
+        run.template operator()<typename VecFor<scalar_t>::V, DK, DV>();
+      });
   });
-  return {out, lse};
+  return {unpad_channels(out, dv), lse};
 }
 
 std::vector<torch::Tensor> rana_backward(torch::Tensor dout, torch::Tensor q, torch::Tensor k, torch::Tensor v,
                                          torch::Tensor lse, torch::Tensor delta, torch::Tensor q_pixels,
                                          torch::Tensor k_offsets, int64_t Hk, int64_t Wk, torch::Tensor rows_dy,
                                          torch::Tensor rows_dx0, torch::Tensor rows_dx1, int64_t R,
-                                         c10::optional<torch::Tensor> bias, double scale, bool need_dbias) {
+                                         c10::optional<torch::Tensor> bias, double scale, bool need_dbias,
+                                         bool scalar_lanes) {
   check_inputs(q, k, v, q_pixels, k_offsets, Hk, Wk);
   TORCH_CHECK(dout.is_contiguous() && lse.is_contiguous() && delta.is_contiguous(), "grads must be contiguous");
-  const Problem pb = make_problem(q, k, v, k_offsets, Hk, Wk, rows_dy, rows_dx0, rows_dx1, R);
-  const QueryIndex qi = index_queries(q_pixels, pb.grid);
-  auto dq = torch::empty_like(q);
-  auto dk = torch::empty_like(k);
-  auto dv = torch::empty_like(v);
+  const int64_t H = q.size(1), dk = q.size(2), dv = v.size(2);
+  const bool dbl = q.scalar_type() == torch::kDouble;
+  int64_t DKp = padded_dk(dk, dbl), DVp = padded_dv(dv, dbl);
+  if (scalar_lanes) {
+    TORCH_CHECK(dk <= kScalarLaneDim && dv <= kScalarLaneDim, "scalar lanes: head dimensions up to 16");
+    DKp = DVp = kScalarLaneDim;
+  }
+  const Grid grid{k_offsets.data_ptr<int64_t>(), Hk, Wk};
+  const QueryIndex qi = index_queries(q_pixels, grid);
+  const auto qp = pad_channels(q, DKp), kp = pad_channels(k, DKp), vp = pad_channels(v, DVp),
+             dop = pad_channels(dout, DVp);
+  auto dq = torch::empty_like(qp);
+  auto dk_t = torch::empty_like(kp);
+  auto dv_t = torch::empty_like(vp);
   const int64_t side = 2 * R + 1;
-  auto dbias = need_dbias ? torch::empty({pb.H, side, side}, q.options()) : torch::Tensor();
+  auto dbias = need_dbias ? torch::empty({H, side, side}, q.options()) : torch::Tensor();
   AT_DISPATCH_FLOATING_TYPES(q.scalar_type(), "rana_backward", [&] {
     const scalar_t* b = bias.has_value() ? bias->data_ptr<scalar_t>() : nullptr;
-    dispatch_dims(pb.dk, pb.dv, [&]<int DK, int DV>() {
-      backward_impl<scalar_t, DK, DV>(pb, q, k, v, dout, lse, delta, qi, b, scalar_t(scale),
-                                      dq.data_ptr<scalar_t>(), dk.data_ptr<scalar_t>(), dv.data_ptr<scalar_t>(),
-                                      need_dbias ? dbias.data_ptr<scalar_t>() : nullptr);
-    });
+    const auto t = make_op<scalar_t>(H, DKp, DVp, k_offsets, Hk, Wk, rows_dy, rows_dx0, rows_dx1, R, b,
+                                     scalar_t(scale));
+    auto run = [&]<typename V, int DK, int DV>() {
+      backward_impl<scalar_t, V, DK, DV>(t.op, qp, kp, vp, dop, lse, delta, qi, dq.data_ptr<scalar_t>(),
+                                         dk_t.data_ptr<scalar_t>(), dv_t.data_ptr<scalar_t>(),
+                                         need_dbias ? dbias.data_ptr<scalar_t>() : nullptr);
+    };
+    if (scalar_lanes)
+      run.template operator()<scalar_t, kScalarLaneDim, kScalarLaneDim>();
+    else
+      dispatch_dims<scalar_t>(DKp, DVp, [&]<int DK, int DV>() {
+        run.template operator()<typename VecFor<scalar_t>::V, DK, DV>();
+      });
   });
-  return {dq, dk, dv, dbias};
+  return {unpad_channels(dq, dk), unpad_channels(dk_t, dk), unpad_channels(dv_t, dv), dbias};
 }
 
 }  // namespace
 
 PYBIND11_MODULE(TORCH_EXTENSION_NAME, m) {
-  m.def("forward", &rana_forward, "RaNA forward (CPU): returns (out, lse)");
+  m.def("forward", &rana_forward, "RaNA forward (CPU): returns (out, lse)");  // NOLINT
   m.def("backward", &rana_backward, "RaNA backward (CPU): returns (dq, dk, dv, dbias)");
 }

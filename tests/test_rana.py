@@ -46,6 +46,9 @@ def layouts(h=7, w=6, seed=0):
 
 CASES = [(name, radius, with_bias) for name in ("self", "down", "up", "temporal")
          for radius, with_bias in ((0.0, False), (1.0, True), (2.5, True), (2.5, False))]
+# "cpu": 16 (float) or 8 (double) queries per SIMD block; "cpu-scalar": the same bodies with one lane per block,
+# exactly as a GPU thread runs them.
+KERNELS = ("cpu", "cpu-scalar")
 
 
 def _inputs(name, radius, with_bias, dtype, d=4, dv=3, heads=2):
@@ -57,13 +60,14 @@ def _inputs(name, radius, with_bias, dtype, d=4, dv=3, heads=2):
     return q, k, v, qp, ko, ks, bias
 
 
+@pytest.mark.parametrize("kernel", KERNELS)
 @pytest.mark.parametrize("name,radius,with_bias", CASES)
-def test_cpu_kernels_gradcheck_float64(name, radius, with_bias):
+def test_cpu_kernels_gradcheck_float64(name, radius, with_bias, kernel):
     q, k, v, qp, ko, ks, bias = _inputs(name, radius, with_bias, torch.float64)
     tensors = [t.requires_grad_(True) for t in (q, k, v) + ((bias,) if bias is not None else ())]
 
     def f(q, k, v, *b):
-        return rana(q, k, v, qp, ko, ks, radius, b[0] if b else None, backend="cpu")
+        return rana(q, k, v, qp, ko, ks, radius, b[0] if b else None, backend=kernel)
 
     assert torch.autograd.gradcheck(f, tensors, eps=1e-6, atol=1e-7, rtol=1e-5)
 
@@ -75,11 +79,12 @@ def test_reference_gradcheck_float64(name):
     assert torch.autograd.gradcheck(lambda q, k, v, b: rana_reference(q, k, v, qp, ko, ks, 1.5, b), tensors)
 
 
+@pytest.mark.parametrize("kernel", KERNELS)
 @pytest.mark.parametrize("name,radius,with_bias", CASES)
-def test_cpu_equals_reference_float32(name, radius, with_bias):
+def test_cpu_equals_reference_float32(name, radius, with_bias, kernel):
     q, k, v, qp, ko, ks, bias = _inputs(name, radius, with_bias, torch.float32, d=16, dv=16, heads=4)
     grads = []
-    for backend in ("cpu", "reference"):
+    for backend in (kernel, "reference"):
         ts = [t.clone().requires_grad_(True) for t in (q, k, v) + ((bias,) if bias is not None else ())]
         out = rana(*ts[:3], qp, ko, ks, radius, ts[3] if bias is not None else None, backend=backend)
         g = torch.autograd.grad(out, ts, torch.linspace(-1, 1, out.numel()).reshape(out.shape))
@@ -88,6 +93,29 @@ def test_cpu_equals_reference_float32(name, radius, with_bias):
     torch.testing.assert_close(a, b, atol=1e-5, rtol=1e-5)
     for x, y in zip(ga, gb):
         torch.testing.assert_close(x, y, atol=1e-5 * max(1.0, float(y.abs().max())), rtol=1e-5)
+
+
+@pytest.mark.parametrize("d,dv", [(5, 7), (24, 20), (40, 3), (8, 1), (64, 64)])
+def test_head_sizes_padded_to_compiled_sizes(d, dv):
+    """Head sizes the kernels are not compiled for run padded with zero channels: same results as the oracle."""
+    q, k, v = qkv(*_counts("self"), 2, d, dv, torch.float32)
+    qp, ko, ks = {n: (a, b, c) for n, a, b, c in layouts()}["self"]
+    bias = torch.randn(2, 5, 5)
+    res = []
+    for backend in ("cpu", "reference"):
+        ts = [t.clone().requires_grad_(True) for t in (q, k, v, bias)]
+        out = rana(*ts[:3], qp, ko, ks, 2.5, ts[3], backend=backend)
+        res.append((out, *torch.autograd.grad(out, ts, torch.linspace(-1, 1, out.numel()).reshape(out.shape))))
+    assert res[0][0].shape == (q.shape[0], 2, dv)
+    for x, y in zip(*res):
+        x, y = x.detach(), y.detach()
+        torch.testing.assert_close(x, y, atol=1e-5 * max(1.0, float(y.abs().max())), rtol=1e-5)
+
+
+def _counts(name):
+    """(queries, key bins) of one of the test layouts."""
+    qp, ko, _ = {n: (a, b, c) for n, a, b, c in layouts()}[name]
+    return qp.shape[0], int(ko[-1])
 
 
 def test_definition_on_a_hand_example():

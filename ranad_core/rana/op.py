@@ -4,6 +4,8 @@ Registered as torch custom ops (``ranad::rana_fwd`` / ``ranad::rana_bwd`` with a
 shapes) so it composes with autograd and torch.compile. Backends, picked by ``backend``:
 
 * ``"cpu"``: the C++/OpenMP kernels (``cuda/rana_cpu.cpp``), built on first use;
+* ``"cpu-scalar"``: the same kernels with one lane per block, i.e. the bodies exactly as a GPU thread runs
+  them (head dimensions up to 16; slow; for tests);
 * ``"reference"``: the plain-torch oracle (:mod:`.reference`), any device, slow and memory-hungry;
 * ``"auto"`` (default): the C++ kernels for CPU tensors when they build, the reference otherwise.
 """
@@ -19,7 +21,7 @@ from .extension import cpu_extension_or_none, load_cpu_extension
 from .neighborhood import disc
 from .reference import rana_reference
 
-Backend = Literal["auto", "cpu", "reference"]
+Backend = Literal["auto", "cpu", "cpu-scalar", "reference"]
 
 
 def _disc_args(radius: float):
@@ -30,23 +32,25 @@ def _disc_args(radius: float):
 
 @torch.library.custom_op("ranad::rana_fwd", mutates_args=())
 def rana_fwd(q: torch.Tensor, k: torch.Tensor, v: torch.Tensor, q_pixels: torch.Tensor, k_offsets: torch.Tensor,
-             hk: int, wk: int, radius: float, bias: Optional[torch.Tensor]) -> tuple[torch.Tensor, torch.Tensor]:
+             hk: int, wk: int, radius: float, bias: Optional[torch.Tensor], scalar_lanes: bool = False
+             ) -> tuple[torch.Tensor, torch.Tensor]:
     """Forward kernels: (out [Nq, H, dv], lse [Nq, H]); lse is -inf for queries with an empty disc."""
     dy, dx0, dx1, R = _disc_args(radius)
     ext = load_cpu_extension()
-    out, lse = ext.forward(q, k, v, q_pixels, k_offsets, hk, wk, dy, dx0, dx1, R, bias, 1.0 / math.sqrt(q.shape[2]))
+    out, lse = ext.forward(q, k, v, q_pixels, k_offsets, hk, wk, dy, dx0, dx1, R, bias, 1.0 / math.sqrt(q.shape[2]),
+                           scalar_lanes)
     return out, lse
 
 
 @rana_fwd.register_fake
-def _(q, k, v, q_pixels, k_offsets, hk, wk, radius, bias):
+def _(q, k, v, q_pixels, k_offsets, hk, wk, radius, bias, scalar_lanes=False):
     return q.new_empty((q.shape[0], q.shape[1], v.shape[2])), q.new_empty((q.shape[0], q.shape[1]))
 
 
 @torch.library.custom_op("ranad::rana_bwd", mutates_args=())
 def rana_bwd(dout: torch.Tensor, q: torch.Tensor, k: torch.Tensor, v: torch.Tensor, out: torch.Tensor,
              lse: torch.Tensor, q_pixels: torch.Tensor, k_offsets: torch.Tensor, hk: int, wk: int, radius: float,
-             bias: Optional[torch.Tensor], need_dbias: bool
+             bias: Optional[torch.Tensor], need_dbias: bool, scalar_lanes: bool = False
              ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
     """Backward kernels: (dq, dk, dv, dbias); dbias is an empty tensor when not needed."""
     dy, dx0, dx1, R = _disc_args(radius)
@@ -54,33 +58,34 @@ def rana_bwd(dout: torch.Tensor, q: torch.Tensor, k: torch.Tensor, v: torch.Tens
     delta = (dout * out).sum(-1).contiguous()
     ext = load_cpu_extension()
     dq, dk, dv, dbias = ext.backward(dout, q, k, v, lse, delta, q_pixels, k_offsets, hk, wk, dy, dx0, dx1, R,
-                                     bias, 1.0 / math.sqrt(q.shape[2]), need_dbias)
+                                     bias, 1.0 / math.sqrt(q.shape[2]), need_dbias, scalar_lanes)
     if not need_dbias:
         dbias = q.new_empty((0,))
     return dq, dk, dv, dbias
 
 
 @rana_bwd.register_fake
-def _(dout, q, k, v, out, lse, q_pixels, k_offsets, hk, wk, radius, bias, need_dbias):
+def _(dout, q, k, v, out, lse, q_pixels, k_offsets, hk, wk, radius, bias, need_dbias, scalar_lanes=False):
     side = disc(radius).side
     db = q.new_empty((q.shape[1], side, side)) if need_dbias else q.new_empty((0,))
     return torch.empty_like(q), torch.empty_like(k), torch.empty_like(v), db
 
 
 def _setup_context(ctx, inputs, output):
-    q, k, v, q_pixels, k_offsets, hk, wk, radius, bias = inputs
+    q, k, v, q_pixels, k_offsets, hk, wk, radius, bias, scalar_lanes = inputs
     out, lse = output
     ctx.save_for_backward(q, k, v, out, lse, q_pixels, k_offsets, bias)
-    ctx.geometry = (hk, wk, radius)
+    ctx.geometry = (hk, wk, radius, scalar_lanes)
     ctx.has_bias = bias is not None
 
 
 def _backward(ctx, dout, dlse):
     q, k, v, out, lse, q_pixels, k_offsets, bias = ctx.saved_tensors
-    hk, wk, radius = ctx.geometry
+    hk, wk, radius, scalar_lanes = ctx.geometry
     need_dbias = ctx.has_bias and ctx.needs_input_grad[8]
-    dq, dk, dv, dbias = rana_bwd(dout, q, k, v, out, lse, q_pixels, k_offsets, hk, wk, radius, bias, need_dbias)
-    return dq, dk, dv, None, None, None, None, None, (dbias if need_dbias else None)
+    dq, dk, dv, dbias = rana_bwd(dout, q, k, v, out, lse, q_pixels, k_offsets, hk, wk, radius, bias, need_dbias,
+                                 scalar_lanes)
+    return dq, dk, dv, None, None, None, None, None, (dbias if need_dbias else None), None
 
 
 rana_fwd.register_autograd(_backward, setup_context=_setup_context)
@@ -118,10 +123,10 @@ def rana(q: torch.Tensor, k: torch.Tensor, v: torch.Tensor, q_pixels: torch.Tens
     relative-position bias added to the logits. Returns out [Nq, heads, dv] with scale 1/sqrt(d); a query
     whose disc holds no key bins gets zeros.
     """
-    if backend not in ("auto", "cpu", "reference"):
+    if backend not in ("auto", "cpu", "cpu-scalar", "reference"):
         raise ValueError(f"unknown RaNA backend {backend!r}")
     hk, wk = _validate(q, k, v, q_pixels, k_offsets, k_size, radius, bias)
-    use_cpu = backend == "cpu" or (backend == "auto" and q.device.type == "cpu" and cpu_extension_or_none())
+    use_cpu = backend in ("cpu", "cpu-scalar") or (backend == "auto" and q.device.type == "cpu" and cpu_extension_or_none())
     if not use_cpu:
         return rana_reference(q, k, v, q_pixels, k_offsets, (hk, wk), radius, bias)
     q, k, v = q.contiguous(), k.contiguous(), v.contiguous()
@@ -129,5 +134,5 @@ def rana(q: torch.Tensor, k: torch.Tensor, v: torch.Tensor, q_pixels: torch.Tens
     k_offsets = k_offsets.to(torch.int64).contiguous()
     if bias is not None:
         bias = bias.to(q.dtype).contiguous()
-    out, _ = rana_fwd(q, k, v, q_pixels, k_offsets, hk, wk, float(radius), bias)
+    out, _ = rana_fwd(q, k, v, q_pixels, k_offsets, hk, wk, float(radius), bias, backend == "cpu-scalar")
     return out
