@@ -4,6 +4,7 @@ Default problem (issue 3): a 512x512 layout with 0..6 bins per pixel (mean ~3), 
 channels. Prints forward and forward+backward time, query-key pairs per second, GFLOP/s (4*d FLOPs per
 pair per head, the usual attention count: q.k and p.v, multiply and add), peak memory of the process, and
 the speed-up over the reference on a size the reference can handle (``--ref-size``).
+Torch's allocator is asked for transparent huge pages, as the ranad CLI does (THP_MEM_ALLOC_ENABLE=0 to compare).
 Usage: python bench/rana.py [--size 512 --radius 3.5 --heads 4 --dim 16 --threads N]
 """
 
@@ -15,7 +16,8 @@ import resource
 import sys
 import time
 
-import torch
+os.environ.setdefault("THP_MEM_ALLOC_ENABLE", "1")  # as the ranad CLI does (see ranad_cli/main.py)
+import torch  # noqa: E402
 
 sys.path.insert(0, os.path.join(os.path.dirname(__file__), ".."))
 from ranad_core.rana import rana, self_attention_layout  # noqa: E402

@@ -189,6 +189,12 @@ Block<L> fill_block(const BlockSpan& s, const int64_t* ptr, int64_t Wk, const in
   return b;
 }
 
+// The key pixels of a query block's discs.
+template <typename T, int L>
+rana::PixelWalk key_walk(const rana::Op<T>& op, const Block<L>& b) {
+  return rana::PixelWalk{op.g, op.rows, op.g.offsets, 1, b.y, b.x0, b.span};
+}
+
 template <typename T>
 struct Tables {
   std::vector<T> tab;
@@ -215,11 +221,17 @@ void forward_impl(const rana::Op<T>& op, const T* q, const T* k, const T* v, con
   constexpr int L = rana::Lanes<V>::L;
   const auto blocks = make_blocks(qi.ptr.data(), op.g.Hk, op.g.Wk, L);
   const int64_t* order = qi.identity ? nullptr : qi.order.data_ptr<int64_t>();
-#pragma omp parallel for schedule(dynamic, 16) num_threads(threads())
-  for (size_t i = 0; i < blocks.size(); ++i) {
-    const Block<L> b = fill_block<L>(blocks[i], qi.ptr.data(), op.g.Wk, order);
-    const auto lt = rana::lane_table(b, op.rows, op.H, 1);
-    for (int h = 0; h < op.H; ++h) rana::forward_block_head<V, DK, DV, kBuffer>(op, b, lt, h, q, k, v, out, lse);
+#pragma omp parallel num_threads(threads())
+  {
+    std::vector<rana::PixelRun> runs(rana::max_runs(op.rows));
+#pragma omp for schedule(dynamic, 16)
+    for (size_t i = 0; i < blocks.size(); ++i) {
+      const Block<L> b = fill_block<L>(blocks[i], qi.ptr.data(), op.g.Wk, order);
+      const auto lt = rana::lane_table(b, op.rows, op.H, 1);
+      const int n = rana::record_runs(key_walk(op, b), runs.data());
+      for (int h = 0; h < op.H; ++h)
+        rana::forward_block_head<V, DK, DV, kBuffer>(op, b, lt, rana::RunWalk{runs.data(), n}, h, q, k, v, out, lse);
+    }
   }
 }
 
@@ -242,12 +254,18 @@ void backward_impl(const rana::Op<T>& op, const torch::Tensor& q_t, const torch:
     const T* dout = dout_t.data_ptr<T>();
     const T* lse = lse_pos.data_ptr<T>();
     const T* delta = delta_t.data_ptr<T>();
-#pragma omp parallel for schedule(dynamic, 16) num_threads(threads())
-    for (size_t i = 0; i < blocks.size(); ++i) {
-      const Block<L> b = fill_block<L>(blocks[i], qi.ptr.data(), op.g.Wk, order);
-      const auto lt = rana::lane_table(b, op.rows, H, 1);
-      for (int h = 0; h < H; ++h)
-        rana::backward_dq_block_head<V, DK, DV, kBuffer>(op, b, lt, h, q, dout, lse, delta, k, v, dq);
+#pragma omp parallel num_threads(threads())
+    {
+      std::vector<rana::PixelRun> runs(rana::max_runs(op.rows));
+#pragma omp for schedule(dynamic, 16)
+      for (size_t i = 0; i < blocks.size(); ++i) {
+        const Block<L> b = fill_block<L>(blocks[i], qi.ptr.data(), op.g.Wk, order);
+        const auto lt = rana::lane_table(b, op.rows, H, 1);
+        const int n = rana::record_runs(key_walk(op, b), runs.data());
+        for (int h = 0; h < H; ++h)
+          rana::backward_dq_block_head<V, DK, DV, kBuffer>(op, b, lt, rana::RunWalk{runs.data(), n}, h, q, dout, lse,
+                                                           delta, k, v, dq);
+      }
     }
   }
 
@@ -267,13 +285,16 @@ void backward_impl(const rana::Op<T>& op, const torch::Tensor& q_t, const torch:
 #pragma omp parallel for schedule(dynamic, 1) num_threads(threads())
   for (int64_t c = 0; c < nchunks; ++c) {
     std::vector<T> lanes(dbias ? H * lane_size : 0, T(0));
+    std::vector<rana::PixelRun> runs(rana::max_runs(op.rows));
     const int64_t be = std::min<int64_t>(blocks.size(), (c + 1) * kBlocksPerChunk);
     for (int64_t i = c * kBlocksPerChunk; i < be; ++i) {
       const Block<L> b = fill_block<L>(blocks[i], op.g.offsets, op.g.Wk, nullptr);
       const auto lt = rana::lane_table(b, op.rows, H, -1);
+      const int n = rana::record_runs(rana::PixelWalk{op.g, op.rows, qi.ptr.data(), -1, b.y, b.x0, b.span},
+                                      runs.data());
       for (int h = 0; h < H; ++h)
-        rana::backward_dkdv_block_head<V, DK, DV, kBuffer>(op, b, lt, h, qi.ptr.data(), qs, dos, lse_s, delta_s, k,
-                                                           v, dk_out, dv_out,
+        rana::backward_dkdv_block_head<V, DK, DV, kBuffer>(op, b, lt, rana::RunWalk{runs.data(), n}, h, qs, dos,
+                                                           lse_s, delta_s, k, v, dk_out, dv_out,
                                                            dbias ? lanes.data() + h * lane_size : nullptr);
     }
     if (dbias) {  // per-lane tables -> this chunk's [H, side, side], in a fixed order

@@ -26,7 +26,10 @@
 #define RANA_HD __host__ __device__ __forceinline__
 #define RANA_UNROLL _Pragma("unroll")
 #define RANA_NOINLINE
+#define RANA_PREFETCH(p)
 #else
+// Rows the buffer step will read are requested while the buffer fills (they stay in L1 until then).
+#define RANA_PREFETCH(p) __builtin_prefetch(p)
 // The buffer steps are called out of line: inlined, their registers pushed the block's operand registers out of
 // the hot loop that fills the buffer.
 #define RANA_NOINLINE __attribute__((noinline))
@@ -127,6 +130,26 @@ RANA_HD float fast_exp(float x) {
 RANA_HD double fast_exp(double x) { return std::exp(x); }
 #if !defined(__CUDACC__)
 inline f32x16 fast_exp(f32x16 x) {  // the same steps on 16 lanes
+#if defined(__AVX512F__)
+  // AVX-512: round and scale in one instruction each (vrndscaleps, vscalefps). Inputs below -87 give exactly 0
+  // through a mask, not through underflow (an underflowing vscalefps costs a microcode assist per instruction).
+  const __mmask16 keep = _mm512_cmp_ps_mask(reinterpret_cast<const __m512&>(x), _mm512_set1_ps(-87.0f), _CMP_GE_OQ);
+  __m512 v = _mm512_min_ps(_mm512_max_ps(reinterpret_cast<const __m512&>(x), _mm512_set1_ps(-87.0f)),
+                           _mm512_set1_ps(88.0f));
+  const __m512 n = _mm512_roundscale_ps(_mm512_mul_ps(v, _mm512_set1_ps(1.44269504088896341f)),
+                                        _MM_FROUND_TO_NEAREST_INT | _MM_FROUND_NO_EXC);
+  __m512 r = _mm512_fnmadd_ps(n, _mm512_set1_ps(0.693359375f), v);
+  r = _mm512_fnmadd_ps(n, _mm512_set1_ps(-2.12194440e-4f), r);
+  __m512 p = _mm512_set1_ps(1.9875691500e-4f);
+  p = _mm512_fmadd_ps(p, r, _mm512_set1_ps(1.3981999507e-3f));
+  p = _mm512_fmadd_ps(p, r, _mm512_set1_ps(8.3334519073e-3f));
+  p = _mm512_fmadd_ps(p, r, _mm512_set1_ps(4.1665795894e-2f));
+  p = _mm512_fmadd_ps(p, r, _mm512_set1_ps(1.6666665459e-1f));
+  p = _mm512_fmadd_ps(p, r, _mm512_set1_ps(5.0000001201e-1f));
+  p = _mm512_fmadd_ps(_mm512_mul_ps(p, r), r, _mm512_add_ps(r, _mm512_set1_ps(1.0f)));
+  const __m512 e = _mm512_maskz_scalef_ps(keep, p, n);
+  return reinterpret_cast<const f32x16&>(e);
+#else
   const i32x16 under = x < -87.0f;
   x = x < -87.0f ? splat<f32x16>(-87.0f) : x;
   x = x > 88.0f ? splat<f32x16>(88.0f) : x;
@@ -145,6 +168,7 @@ inline f32x16 fast_exp(f32x16 x) {  // the same steps on 16 lanes
   const i32x16 bits = (__builtin_convertvector(n, i32x16) + 127) << 23;
   const f32x16 e = p * reinterpret_cast<const f32x16&>(bits);
   return under ? splat<f32x16>(0.0f) : e;
+#endif
 }
 inline f64x8 fast_exp(f64x8 x) {
   for (int i = 0; i < 8; ++i) x[i] = std::exp(x[i]);
@@ -296,6 +320,39 @@ struct PixelWalk {
   }
 };
 
+// A walk recorded once per block (the CPU kernels replay it for every head rather than walk the grid again).
+struct PixelRun {
+  int32_t r, x;
+  int64_t first, last;
+};
+
+// Most runs a walk of one block can produce: every disc row, its widest span of pixels.
+RANA_HD int max_runs(const DiscRows& rows) { return rows.n * (2 * rows.R + 2 + kMaxSpan); }
+
+template <typename W>
+RANA_HD int record_runs(W walk, PixelRun* runs) {
+  int n = 0;
+  PixelRun p;
+  while (walk.next(p.r, p.x, p.first, p.last)) runs[n++] = p;
+  return n;
+}
+
+struct RunWalk {
+  const PixelRun* runs;
+  int n;
+  int i = 0;
+
+  RANA_HD bool next(int& r, int32_t& x, int64_t& first, int64_t& last) {
+    if (i >= n) return false;
+    const PixelRun& p = runs[i++];
+    r = p.r;
+    x = p.x;
+    first = p.first;
+    last = p.last;
+    return true;
+  }
+};
+
 // Everything the bodies share: geometry, table, sizes.
 template <typename T>
 struct Op {
@@ -370,9 +427,9 @@ RANA_HD V load_lane_scalars(const typename Lanes<V>::T* x, const Block<Lanes<V>:
 // Online softmax over the keys of the block's discs, buffered: logits of up to NB keys are kept, then one
 // step per full buffer finds the new maximum, rescales, and accumulates p * v. Writes out [Nq, H, DV] and
 // lse [Nq, H] (-inf and zeros for a query whose disc holds no key bins).
-template <typename V, int DK, int DV, int NB>
+template <typename V, int DK, int DV, int NB, typename W>
 RANA_HD void forward_block_head(const Op<typename Lanes<V>::T>& op, const Block<Lanes<V>::L>& b,
-                                const LaneTable<Lanes<V>::L>& lt, int h, const typename Lanes<V>::T* q,
+                                const LaneTable<Lanes<V>::L>& lt, W walk, int h, const typename Lanes<V>::T* q,
                                 const typename Lanes<V>::T* __restrict__ k, const typename Lanes<V>::T* __restrict__ v,
                                 typename Lanes<V>::T* out, typename Lanes<V>::T* lse) {
   using T = typename Lanes<V>::T;
@@ -386,42 +443,49 @@ RANA_HD void forward_block_head(const Op<typename Lanes<V>::T>& op, const Block<
   V s[NB];
   int64_t key[NB];
   int nb = 0;
-  auto flush = [&]() RANA_NOINLINE {
+  auto flush = [&](V mx) RANA_NOINLINE {
     V acc[DV];
     RANA_UNROLL
     for (int c = 0; c < DV; ++c) acc[c] = acc_mem[c];
-    V mx = splat<V>(neg_inf<T>());
-    for (int i = 0; i < nb; ++i) mx = vmax(mx, s[i]);
     const V mn = vmax(m, mx);
     const V base = mn == neg_inf<T>() ? splat<V>(0) : mn;  // lanes with nothing yet: exp(-inf - 0) = 0
     const V corr = fast_exp(m - base);
     l *= corr;
     RANA_UNROLL
     for (int c = 0; c < DV; ++c) acc[c] *= corr;
+    // two loops: the exp chains are long, and a loop of only exps keeps many in flight
+    V sum = splat<V>(0);
     for (int i = 0; i < nb; ++i) {
-      const V p = fast_exp(s[i] - base);
-      l += p;
-      axpy_row<V, DV>(acc, p, v + (key[i] * H + h) * DV);
+      s[i] = fast_exp(s[i] - base);
+      sum += s[i];
     }
+    l += sum;
+    for (int i = 0; i < nb; ++i) axpy_row<V, DV>(acc, s[i], v + (key[i] * H + h) * DV);
     RANA_UNROLL
     for (int c = 0; c < DV; ++c) acc_mem[c] = acc[c];
     keep_in_memory(acc_mem);
     m = mn;
     nb = 0;
   };
-  PixelWalk walk{op.g, op.rows, op.g.offsets, 1, b.y, b.x0, b.span};
   int r;
   int32_t x;
   int64_t first, last;
+  V mx = splat<V>(neg_inf<T>());  // maximum of the buffered logits
   while (walk.next(r, x, first, last)) {
     const V bv = lane_bias<V>(op.tab, lt, (h * op.rows.n + r) * tw, x);
     for (int64_t j = first; j < last; ++j) {
-      if (nb == NB) flush();
-      s[nb] = dot_rows<V, DK>(qr, k + (j * H + h) * DK, bv);
+      if (nb == NB) {
+        flush(mx);
+        mx = splat<V>(neg_inf<T>());
+      }
+      RANA_PREFETCH(v + (j * H + h) * DV);
+      const V sj = dot_rows<V, DK>(qr, k + (j * H + h) * DK, bv);
+      mx = vmax(mx, sj);
+      s[nb] = sj;
       key[nb++] = j;
     }
   }
-  flush();
+  flush(mx);
   const V empty = l == T(0) ? splat<V>(1) : splat<V>(0);
   const V inv = T(1) / (l + empty);
   RANA_UNROLL
@@ -434,9 +498,9 @@ RANA_HD void forward_block_head(const Op<typename Lanes<V>::T>& op, const Block<
 // ---- backward, dQ: one query block, one head ----------------------------------------------------------
 // FlashAttention-2: p = exp(s - lse), ds = p (dO.v - delta), dq = scale sum ds k. lse must be +inf (not -inf)
 // for queries with an empty disc, giving p = 0. Writes dq [Nq, H, DK].
-template <typename V, int DK, int DV, int NB>
+template <typename V, int DK, int DV, int NB, typename W>
 RANA_HD void backward_dq_block_head(const Op<typename Lanes<V>::T>& op, const Block<Lanes<V>::L>& b,
-                                    const LaneTable<Lanes<V>::L>& lt, int h, const typename Lanes<V>::T* q,
+                                    const LaneTable<Lanes<V>::L>& lt, W walk, int h, const typename Lanes<V>::T* q,
                                     const typename Lanes<V>::T* dout, const typename Lanes<V>::T* lse,
                                     const typename Lanes<V>::T* delta, const typename Lanes<V>::T* __restrict__ k,
                                     const typename Lanes<V>::T* __restrict__ v, typename Lanes<V>::T* dq) {
@@ -470,7 +534,6 @@ RANA_HD void backward_dq_block_head(const Op<typename Lanes<V>::T>& op, const Bl
     keep_in_memory(acc_mem);
     nb = 0;
   };
-  PixelWalk walk{op.g, op.rows, op.g.offsets, 1, b.y, b.x0, b.span};
   int r;
   int32_t x;
   int64_t first, last;
@@ -478,6 +541,7 @@ RANA_HD void backward_dq_block_head(const Op<typename Lanes<V>::T>& op, const Bl
     const V bv = lane_bias<V>(op.tab, lt, (h * op.rows.n + r) * tw, x);
     for (int64_t j = first; j < last; ++j) {
       if (nb == NB) flush();
+      RANA_PREFETCH(v + (j * H + h) * DV);
       s[nb] = dot_rows<V, DK>(qr, k + (j * H + h) * DK, bv);
       key[nb++] = j;
     }
@@ -493,9 +557,9 @@ RANA_HD void backward_dq_block_head(const Op<typename Lanes<V>::T>& op, const Bl
 // pixel (q_ptr: CSR over the grid) and given in that order: qs, dos [Nq, H, d], lse_s, delta_s [Nq, H] (lse +inf
 // for queries with an empty disc). Sums run in a fixed order without atomics. dbias_lanes (may be null): per-lane
 // accumulators [L][rows.n][tw], ds added at (lane, r, centre + dx); the caller sums them over lanes.
-template <typename V, int DK, int DV, int NB>
+template <typename V, int DK, int DV, int NB, typename W>
 RANA_HD void backward_dkdv_block_head(const Op<typename Lanes<V>::T>& op, const Block<Lanes<V>::L>& b,
-                                      const LaneTable<Lanes<V>::L>& lt, int h, const int64_t* q_ptr,
+                                      const LaneTable<Lanes<V>::L>& lt, W walk, int h,
                                       const typename Lanes<V>::T* __restrict__ qs,
                                       const typename Lanes<V>::T* __restrict__ dos,
                                       const typename Lanes<V>::T* lse_s, const typename Lanes<V>::T* delta_s,
@@ -560,7 +624,6 @@ RANA_HD void backward_dkdv_block_head(const Op<typename Lanes<V>::T>& op, const 
   {
     V kr[DK];
     load_lanes<V, DK>(k, b, h, H, op.scale, kr);
-    PixelWalk walk{op.g, op.rows, q_ptr, -1, b.y, b.x0, b.span};
     int r;
     int32_t x;
     int64_t first, last;
@@ -568,6 +631,7 @@ RANA_HD void backward_dkdv_block_head(const Op<typename Lanes<V>::T>& op, const 
       const V bv = lane_bias<V>(op.tab, lt, (h * op.rows.n + r) * tw, -x);
       for (int64_t i = first; i < last; ++i) {
         if (nb == NB) flush();
+        RANA_PREFETCH(dos + (i * H + h) * DV);
         s[nb] = dot_rows<V, DK>(kr, qs + (i * H + h) * DK, bv);
         qid[nb] = i;
         tag[nb++] = r * tw + o - x;

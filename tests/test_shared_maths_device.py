@@ -31,9 +31,11 @@ __global__ void smoke(Op<float> op, const float* q, const float* k, const float*
   b.id[0] = i;
   b.rel[0] = 0;
   const LaneTable<1> lq = lane_table(b, op.rows, op.H, 1), lk = lane_table(b, op.rows, op.H, -1);
-  forward_block_head<float, 16, 16, 32>(op, b, lq, 0, q, k, v, out, lse_out);
-  backward_dq_block_head<float, 16, 16, 32>(op, b, lq, 0, q, dout, lse, delta, k, v, dq);
-  backward_dkdv_block_head<float, 16, 16, 32>(op, b, lk, 0, q_ptr, q, dout, lse, delta, k, v, dk, dv, dbias_lanes);
+  const PixelWalk keys{op.g, op.rows, op.g.offsets, 1, b.y, b.x0, 0};
+  const PixelWalk queries{op.g, op.rows, q_ptr, -1, b.y, b.x0, 0};
+  forward_block_head<float, 16, 16, 32>(op, b, lq, keys, 0, q, k, v, out, lse_out);
+  backward_dq_block_head<float, 16, 16, 32>(op, b, lq, keys, 0, q, dout, lse, delta, k, v, dq);
+  backward_dkdv_block_head<float, 16, 16, 32>(op, b, lk, queries, 0, q, dout, lse, delta, k, v, dk, dv, dbias_lanes);
 }
 """
 
