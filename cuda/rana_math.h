@@ -226,38 +226,42 @@ RANA_HD void fill_table(const DiscRows& rows, const T* bias, int H, T* tab) {
       }
 }
 
-// A block of L entries (queries, or keys) of grid row y on pixels x0 .. x0 + span.
-template <int L>
+// A block: up to Q entries (queries, or keys) of grid row y on pixels x0 .. x0 + span. A block runs HB heads at
+// once: lane l holds entry l / HB and head h0 + l % HB, so Q = L / HB. With several heads per block the entries'
+// discs differ less (fewer pixels per block), so fewer lanes are masked: 4 heads x 4 queries spread over ~1.3
+// pixels against 16 queries over ~5.3 pixels at 3 bins per pixel, which visits 1.8x fewer keys per query.
+template <int Q>
 struct Block {
   int64_t y, x0;
   int span;
-  int n;             // entries in use (lanes n..L-1 are padding)
-  int64_t id[L];     // operand row of each lane (entries in use only)
-  int32_t rel[L];    // pixel of each lane minus x0
+  int n;           // entries in use (the lanes of entries n..Q-1 are padding)
+  int64_t id[Q];   // operand row of each entry
+  int32_t rel[Q];  // pixel of each entry minus x0
 };
 
-// Per-lane table indices for a block: lane i reads tab[base[i] + row_offset * used + x] where x is the key
-// pixel minus x0 (queries) or minus the query pixel (keys, sign -1: dx = rel - x); padding lanes read the
-// -inf row.
+// Per-lane table indices for a block: lane l reads tab[base[l] + (row_offset & used[l]) + x] where row_offset is
+// r * tw for disc row r and x is the key pixel minus x0 (queries) or minus the query pixel (keys, sign -1:
+// dx = rel - x); padding lanes read the -inf row.
 template <int L>
 struct LaneTable {
   int32_t base[L];
   int32_t used[L];  // -1 (all bits) for lanes in use, 0 for padding
 };
 
-template <int L>
-RANA_HD LaneTable<L> lane_table(const Block<L>& b, const DiscRows& rows, int H, int sign) {
+template <int L, int HB>
+RANA_HD LaneTable<L> lane_table(const Block<L / HB>& b, const DiscRows& rows, int H, int h0, int sign) {
   LaneTable<L> lt;
   const int tw = table_width(rows.R), o = table_centre(rows.R);
-  for (int i = 0; i < L; ++i) {
-    const bool used = i < b.n;
-    lt.used[i] = used ? -1 : 0;
-    lt.base[i] = used ? o - sign * b.rel[i] : int32_t(int64_t(H) * rows.n * tw + o);
+  for (int l = 0; l < L; ++l) {
+    const int e = l / HB, h = h0 + l % HB;
+    const bool used = e < b.n;
+    lt.used[l] = used ? -1 : 0;
+    lt.base[l] = used ? (h * rows.n) * tw + o - sign * b.rel[e] : int32_t(int64_t(H) * rows.n * tw + o);
   }
   return lt;
 }
 
-// The L lanes' table entries for one (head, disc row) at x: the bias and mask of one key pixel for every lane.
+// The L lanes' table entries for disc row r (row_offset = r * tw) at x: the bias and mask of one key pixel.
 template <typename V>
 RANA_HD V lane_bias(const typename Lanes<V>::T* tab, const LaneTable<Lanes<V>::L>& lt, int32_t row_offset, int32_t x) {
   constexpr int L = Lanes<V>::L;
@@ -353,7 +357,7 @@ struct RunWalk {
   }
 };
 
-// Everything the bodies share: geometry, table, sizes.
+// Everything the bodies share: geometry, table, sizes. H: heads of the operands (a multiple of the block's HB).
 template <typename T>
 struct Op {
   Grid g;
@@ -363,79 +367,107 @@ struct Op {
   T scale;
 };
 
-// sum_c a[c] * row[c] over D channels with two independent FMA chains
-template <typename V, int D>
-RANA_HD V dot_rows(const V* a, const typename Lanes<V>::T* __restrict__ row, V init) {
+// The HB scalars at p repeated over the L lanes (lane l gets p[l % HB]): one head-chunk of an operand stored
+// [N, d, H], i.e. channel c of HB consecutive heads of one entry.
+template <typename V, int HB>
+RANA_HD V load_chunk(const typename Lanes<V>::T* p) {
+  using T = typename Lanes<V>::T;
+  constexpr int L = Lanes<V>::L;
+  if constexpr (L == 1) {
+    return *p;
+  } else if constexpr (HB == 1) {
+    return splat<V>(*p);
+  } else {
+#if defined(__AVX512F__) && !defined(__CUDACC__)
+    if constexpr (L == 16 && HB == 4 && sizeof(T) == 4) {
+      const __m512 c = _mm512_broadcast_f32x4(_mm_loadu_ps(p));
+      return reinterpret_cast<const V&>(c);
+    }
+#endif
+    T tmp[L];
+    for (int l = 0; l < L; ++l) tmp[l] = p[l % HB];
+    return load_vector<V>(tmp);
+  }
+}
+
+// sum_c a[c] * chunk(row + c * H) over D channels, two independent FMA chains
+template <typename V, int HB, int D>
+RANA_HD V dot_rows(const V* a, const typename Lanes<V>::T* __restrict__ row, int H, V init) {
   V s0 = init, s1 = splat<V>(0);
   RANA_UNROLL
   for (int c = 0; c + 1 < D; c += 2) {
-    s0 += a[c] * row[c];
-    s1 += a[c + 1] * row[c + 1];
+    s0 += a[c] * load_chunk<V, HB>(row + c * H);
+    s1 += a[c + 1] * load_chunk<V, HB>(row + (c + 1) * H);
   }
-  if constexpr (D % 2) s0 += a[D - 1] * row[D - 1];
+  if constexpr (D % 2) s0 += a[D - 1] * load_chunk<V, HB>(row + (D - 1) * H);
   return s0 + s1;
 }
 
-// acc[c] += w * row[c]
-template <typename V, int D>
-RANA_HD void axpy_row(V* acc, V w, const typename Lanes<V>::T* __restrict__ row) {
+// acc[c] += w * chunk(row + c * H)
+template <typename V, int HB, int D>
+RANA_HD void axpy_rows(V* acc, V w, const typename Lanes<V>::T* __restrict__ row, int H) {
   RANA_UNROLL
-  for (int c = 0; c < D; ++c) acc[c] += w * row[c];
+  for (int c = 0; c < D; ++c) acc[c] += w * load_chunk<V, HB>(row + c * H);
 }
 
-// Loads the block's rows of head h of x [N, H, D] (times mul) into D lane vectors (0 for padding lanes). Staged
-// through a scalar array: writing single lanes of out[] would force the whole array into memory.
-template <typename V, int D>
-RANA_HD void load_lanes(const typename Lanes<V>::T* x, const Block<Lanes<V>::L>& b, int h, int H,
+// Loads the block's rows of x [N, H, D] (times mul) into D lane vectors (0 for padding lanes). Staged through a
+// scalar array: writing single lanes of out[] would force the whole array into memory.
+template <typename V, int HB, int D>
+RANA_HD void load_lanes(const typename Lanes<V>::T* x, const Block<Lanes<V>::L / HB>& b, int h0, int H,
                         typename Lanes<V>::T mul, V* out) {
   using T = typename Lanes<V>::T;
   constexpr int L = Lanes<V>::L;
   T tmp[D * L];
-  for (int i = b.n; i < L; ++i)
-    for (int c = 0; c < D; ++c) tmp[c * L + i] = T(0);
-  for (int i = 0; i < b.n; ++i) {
-    const T* row = x + (b.id[i] * H + h) * D;
-    RANA_UNROLL
-    for (int c = 0; c < D; ++c) tmp[c * L + i] = row[c] * mul;
+  for (int l = 0; l < L; ++l) {
+    const int e = l / HB;
+    if (e < b.n) {
+      const T* row = x + (b.id[e] * H + h0 + l % HB) * D;
+      RANA_UNROLL
+      for (int c = 0; c < D; ++c) tmp[c * L + l] = row[c] * mul;
+    } else {
+      RANA_UNROLL
+      for (int c = 0; c < D; ++c) tmp[c * L + l] = T(0);
+    }
   }
   RANA_UNROLL
   for (int c = 0; c < D; ++c) out[c] = load_vector<V>(tmp + c * L);
 }
 
-// Writes D lane vectors to the block's rows of head h of x [N, H, D].
-template <typename V, int D>
-RANA_HD void store_lanes(const V* in, const Block<Lanes<V>::L>& b, int h, int H, typename Lanes<V>::T* x) {
-  for (int i = 0; i < b.n; ++i) {
-    typename Lanes<V>::T* row = x + (b.id[i] * H + h) * D;
+// Writes D lane vectors to the block's rows of x [N, H, D].
+template <typename V, int HB, int D>
+RANA_HD void store_lanes(const V* in, const Block<Lanes<V>::L / HB>& b, int h0, int H, typename Lanes<V>::T* x) {
+  for (int l = 0; l < b.n * HB; ++l) {
+    typename Lanes<V>::T* row = x + (b.id[l / HB] * H + h0 + l % HB) * D;
     RANA_UNROLL
-    for (int c = 0; c < D; ++c) row[c] = lane(in[c], i);
+    for (int c = 0; c < D; ++c) row[c] = lane(in[c], l);
   }
 }
 
-// Per-lane values of a per-entry array x[id * H + h] (pad for padding lanes).
-template <typename V>
-RANA_HD V load_lane_scalars(const typename Lanes<V>::T* x, const Block<Lanes<V>::L>& b, int h, int H,
+// Per-lane values of a per-(entry, head) array x [N, H] (pad for padding lanes).
+template <typename V, int HB>
+RANA_HD V load_lane_scalars(const typename Lanes<V>::T* x, const Block<Lanes<V>::L / HB>& b, int h0, int H,
                             typename Lanes<V>::T pad) {
   using T = typename Lanes<V>::T;
   constexpr int L = Lanes<V>::L;
   T tmp[L];
-  for (int i = 0; i < L; ++i) tmp[i] = i < b.n ? x[b.id[i] * H + h] : pad;
+  for (int l = 0; l < L; ++l) tmp[l] = l / HB < b.n ? x[b.id[l / HB] * H + h0 + l % HB] : pad;
   return load_vector<V>(tmp);
 }
 
-// ---- forward: one query block, one head ---------------------------------------------------------------
-// Online softmax over the keys of the block's discs, buffered: logits of up to NB keys are kept, then one
-// step per full buffer finds the new maximum, rescales, and accumulates p * v. Writes out [Nq, H, DV] and
-// lse [Nq, H] (-inf and zeros for a query whose disc holds no key bins).
-template <typename V, int DK, int DV, int NB, typename W>
-RANA_HD void forward_block_head(const Op<typename Lanes<V>::T>& op, const Block<Lanes<V>::L>& b,
-                                const LaneTable<Lanes<V>::L>& lt, W walk, int h, const typename Lanes<V>::T* q,
-                                const typename Lanes<V>::T* __restrict__ k, const typename Lanes<V>::T* __restrict__ v,
-                                typename Lanes<V>::T* out, typename Lanes<V>::T* lse) {
+// ---- forward: one query block, heads h0 .. h0 + HB - 1 --------------------------------------------------
+// Online softmax over the keys of the block's discs, buffered: logits of up to NB keys are kept, then one step
+// per full buffer rescales and accumulates p * v. q [Nq, H, DK] (natural layout); kt [Nk, DK, H] and
+// vt [Nk, DV, H] (channel-major per key, so one load serves HB heads). Writes out [Nq, H, DV] and lse [Nq, H]
+// (-inf and zeros for a query whose disc holds no key bins).
+template <typename V, int HB, int DK, int DV, int NB, typename W>
+RANA_HD void forward_block(const Op<typename Lanes<V>::T>& op, const Block<Lanes<V>::L / HB>& b,
+                           const LaneTable<Lanes<V>::L>& lt, W walk, int h0, const typename Lanes<V>::T* q,
+                           const typename Lanes<V>::T* __restrict__ kt, const typename Lanes<V>::T* __restrict__ vt,
+                           typename Lanes<V>::T* out, typename Lanes<V>::T* lse) {
   using T = typename Lanes<V>::T;
   const int H = op.H, tw = table_width(op.rows.R);
   V qr[DK], acc_mem[DV];
-  load_lanes<V, DK>(q, b, h, H, op.scale, qr);
+  load_lanes<V, HB, DK>(q, b, h0, H, op.scale, qr);
   RANA_UNROLL
   for (int c = 0; c < DV; ++c) acc_mem[c] = splat<V>(0);
   keep_in_memory(acc_mem);
@@ -460,7 +492,7 @@ RANA_HD void forward_block_head(const Op<typename Lanes<V>::T>& op, const Block<
       sum += s[i];
     }
     l += sum;
-    for (int i = 0; i < nb; ++i) axpy_row<V, DV>(acc, s[i], v + (key[i] * H + h) * DV);
+    for (int i = 0; i < nb; ++i) axpy_rows<V, HB, DV>(acc, s[i], vt + key[i] * DV * H + h0, H);
     RANA_UNROLL
     for (int c = 0; c < DV; ++c) acc_mem[c] = acc[c];
     keep_in_memory(acc_mem);
@@ -472,14 +504,14 @@ RANA_HD void forward_block_head(const Op<typename Lanes<V>::T>& op, const Block<
   int64_t first, last;
   V mx = splat<V>(neg_inf<T>());  // maximum of the buffered logits
   while (walk.next(r, x, first, last)) {
-    const V bv = lane_bias<V>(op.tab, lt, (h * op.rows.n + r) * tw, x);
+    const V bv = lane_bias<V>(op.tab, lt, r * tw, x);
     for (int64_t j = first; j < last; ++j) {
       if (nb == NB) {
         flush(mx);
         mx = splat<V>(neg_inf<T>());
       }
-      RANA_PREFETCH(v + (j * H + h) * DV);
-      const V sj = dot_rows<V, DK>(qr, k + (j * H + h) * DK, bv);
+      RANA_PREFETCH(vt + j * DV * H);
+      const V sj = dot_rows<V, HB, DK>(qr, kt + j * DK * H + h0, H, bv);
       mx = vmax(mx, sj);
       s[nb] = sj;
       key[nb++] = j;
@@ -490,45 +522,46 @@ RANA_HD void forward_block_head(const Op<typename Lanes<V>::T>& op, const Block<
   const V inv = T(1) / (l + empty);
   RANA_UNROLL
   for (int c = 0; c < DV; ++c) acc_mem[c] *= inv;
-  store_lanes<V, DV>(acc_mem, b, h, H, out);
-  for (int i = 0; i < b.n; ++i)
-    lse[b.id[i] * H + h] = lane(l, i) == T(0) ? neg_inf<T>() : lane(m, i) + std::log(lane(l, i));
+  store_lanes<V, HB, DV>(acc_mem, b, h0, H, out);
+  for (int i = 0; i < b.n * HB; ++i)
+    lse[b.id[i / HB] * H + h0 + i % HB] = lane(l, i) == T(0) ? neg_inf<T>() : lane(m, i) + std::log(lane(l, i));
 }
 
-// ---- backward, dQ: one query block, one head ----------------------------------------------------------
+// ---- backward, dQ: one query block, heads h0 .. h0 + HB - 1 ----------------------------------------------
 // FlashAttention-2: p = exp(s - lse), ds = p (dO.v - delta), dq = scale sum ds k. lse must be +inf (not -inf)
-// for queries with an empty disc, giving p = 0. Writes dq [Nq, H, DK].
-template <typename V, int DK, int DV, int NB, typename W>
-RANA_HD void backward_dq_block_head(const Op<typename Lanes<V>::T>& op, const Block<Lanes<V>::L>& b,
-                                    const LaneTable<Lanes<V>::L>& lt, W walk, int h, const typename Lanes<V>::T* q,
-                                    const typename Lanes<V>::T* dout, const typename Lanes<V>::T* lse,
-                                    const typename Lanes<V>::T* delta, const typename Lanes<V>::T* __restrict__ k,
-                                    const typename Lanes<V>::T* __restrict__ v, typename Lanes<V>::T* dq) {
+// for queries with an empty disc, giving p = 0. q, dout [Nq, H, d], lse, delta [Nq, H]; kt, vt as in the
+// forward. Writes dq [Nq, H, DK].
+template <typename V, int HB, int DK, int DV, int NB, typename W>
+RANA_HD void backward_dq_block(const Op<typename Lanes<V>::T>& op, const Block<Lanes<V>::L / HB>& b,
+                               const LaneTable<Lanes<V>::L>& lt, W walk, int h0, const typename Lanes<V>::T* q,
+                               const typename Lanes<V>::T* dout, const typename Lanes<V>::T* lse,
+                               const typename Lanes<V>::T* delta, const typename Lanes<V>::T* __restrict__ kt,
+                               const typename Lanes<V>::T* __restrict__ vt, typename Lanes<V>::T* dq) {
   using T = typename Lanes<V>::T;
   const int H = op.H, tw = table_width(op.rows.R);
   V qr[DK], acc_mem[DK];
-  load_lanes<V, DK>(q, b, h, H, op.scale, qr);
+  load_lanes<V, HB, DK>(q, b, h0, H, op.scale, qr);
   RANA_UNROLL
   for (int c = 0; c < DK; ++c) acc_mem[c] = splat<V>(0);
   keep_in_memory(acc_mem);
-  const V L = load_lane_scalars<V>(lse, b, h, H, T(INFINITY));
-  const V D = load_lane_scalars<V>(delta, b, h, H, T(0));
+  const V L = load_lane_scalars<V, HB>(lse, b, h0, H, T(INFINITY));
+  const V D = load_lane_scalars<V, HB>(delta, b, h0, H, T(0));
   V s[NB];
   int64_t key[NB];
   int nb = 0;
   auto flush = [&]() RANA_NOINLINE {
     {
       V dr[DV];
-      load_lanes<V, DV>(dout, b, h, H, T(1), dr);
+      load_lanes<V, HB, DV>(dout, b, h0, H, T(1), dr);
       for (int i = 0; i < nb; ++i) {
-        const V dp = dot_rows<V, DV>(dr, v + (key[i] * H + h) * DV, splat<V>(0));
+        const V dp = dot_rows<V, HB, DV>(dr, vt + key[i] * DV * H + h0, H, splat<V>(0));
         s[i] = fast_exp(s[i] - L) * (dp - D);
       }
     }
     V acc[DK];
     RANA_UNROLL
     for (int c = 0; c < DK; ++c) acc[c] = acc_mem[c];
-    for (int i = 0; i < nb; ++i) axpy_row<V, DK>(acc, s[i], k + (key[i] * H + h) * DK);
+    for (int i = 0; i < nb; ++i) axpy_rows<V, HB, DK>(acc, s[i], kt + key[i] * DK * H + h0, H);
     RANA_UNROLL
     for (int c = 0; c < DK; ++c) acc_mem[c] = acc[c];
     keep_in_memory(acc_mem);
@@ -538,34 +571,34 @@ RANA_HD void backward_dq_block_head(const Op<typename Lanes<V>::T>& op, const Bl
   int32_t x;
   int64_t first, last;
   while (walk.next(r, x, first, last)) {
-    const V bv = lane_bias<V>(op.tab, lt, (h * op.rows.n + r) * tw, x);
+    const V bv = lane_bias<V>(op.tab, lt, r * tw, x);
     for (int64_t j = first; j < last; ++j) {
       if (nb == NB) flush();
-      RANA_PREFETCH(v + (j * H + h) * DV);
-      s[nb] = dot_rows<V, DK>(qr, k + (j * H + h) * DK, bv);
+      RANA_PREFETCH(vt + j * DV * H);
+      s[nb] = dot_rows<V, HB, DK>(qr, kt + j * DK * H + h0, H, bv);
       key[nb++] = j;
     }
   }
   flush();
   RANA_UNROLL
   for (int c = 0; c < DK; ++c) acc_mem[c] *= op.scale;
-  store_lanes<V, DK>(acc_mem, b, h, H, dq);
+  store_lanes<V, HB, DK>(acc_mem, b, h0, H, dq);
 }
 
-// ---- backward, dK and dV: one key block, one head -----------------------------------------------------
-// From the reverse neighbourhood: the queries whose disc holds a key of the block. Queries are sorted by centre
-// pixel (q_ptr: CSR over the grid) and given in that order: qs, dos [Nq, H, d], lse_s, delta_s [Nq, H] (lse +inf
-// for queries with an empty disc). Sums run in a fixed order without atomics. dbias_lanes (may be null): per-lane
-// accumulators [L][rows.n][tw], ds added at (lane, r, centre + dx); the caller sums them over lanes.
-template <typename V, int DK, int DV, int NB, typename W>
-RANA_HD void backward_dkdv_block_head(const Op<typename Lanes<V>::T>& op, const Block<Lanes<V>::L>& b,
-                                      const LaneTable<Lanes<V>::L>& lt, W walk, int h,
-                                      const typename Lanes<V>::T* __restrict__ qs,
-                                      const typename Lanes<V>::T* __restrict__ dos,
-                                      const typename Lanes<V>::T* lse_s, const typename Lanes<V>::T* delta_s,
-                                      const typename Lanes<V>::T* k, const typename Lanes<V>::T* v,
-                                      typename Lanes<V>::T* dk, typename Lanes<V>::T* dv,
-                                      typename Lanes<V>::T* dbias_lanes) {
+// ---- backward, dK and dV: one key block, heads h0 .. h0 + HB - 1 -----------------------------------------
+// From the reverse neighbourhood: the queries whose disc holds a key of the block, sorted by centre pixel and
+// given in that order: qst [Nq, DK, H], dost [Nq, DV, H] (channel-major), lse_s, delta_s [Nq, H] (lse +inf for
+// queries with an empty disc). k, v [Nk, H, d]. Sums run in a fixed order without atomics. dbias_lanes (may be
+// null): per-lane accumulators [L][rows.n][tw], ds added at (lane, r, centre + dx); the caller sums them into
+// the bias gradient of each lane's head.
+template <typename V, int HB, int DK, int DV, int NB, typename W>
+RANA_HD void backward_dkdv_block(const Op<typename Lanes<V>::T>& op, const Block<Lanes<V>::L / HB>& b,
+                                 const LaneTable<Lanes<V>::L>& lt, W walk, int h0,
+                                 const typename Lanes<V>::T* __restrict__ qst,
+                                 const typename Lanes<V>::T* __restrict__ dost, const typename Lanes<V>::T* lse_s,
+                                 const typename Lanes<V>::T* delta_s, const typename Lanes<V>::T* k,
+                                 const typename Lanes<V>::T* v, typename Lanes<V>::T* dk, typename Lanes<V>::T* dv,
+                                 typename Lanes<V>::T* dbias_lanes) {
   using T = typename Lanes<V>::T;
   constexpr int L = Lanes<V>::L;
   const int H = op.H, tw = table_width(op.rows.R), o = table_centre(op.rows.R);
@@ -583,20 +616,19 @@ RANA_HD void backward_dkdv_block_head(const Op<typename Lanes<V>::T>& op, const 
   auto flush = [&]() RANA_NOINLINE {
     {
       V vr[DV];
-      load_lanes<V, DV>(v, b, h, H, T(1), vr);
+      load_lanes<V, HB, DV>(v, b, h0, H, T(1), vr);
       for (int i = 0; i < nb; ++i) {
-        const T* dor = dos + (qid[i] * H + h) * DV;
-        const V dp = dot_rows<V, DV>(vr, dor, splat<V>(0));
-        const V pi = fast_exp(s[i] - lse_s[qid[i] * H + h]);
+        const V dp = dot_rows<V, HB, DV>(vr, dost + qid[i] * DV * H + h0, H, splat<V>(0));
+        const V pi = fast_exp(s[i] - load_chunk<V, HB>(lse_s + qid[i] * H + h0));
         p[i] = pi;
-        s[i] = pi * (dp - delta_s[qid[i] * H + h]);
+        s[i] = pi * (dp - load_chunk<V, HB>(delta_s + qid[i] * H + h0));
       }
     }
     {
       V acc[DV];
       RANA_UNROLL
       for (int c = 0; c < DV; ++c) acc[c] = acc_v[c];
-      for (int i = 0; i < nb; ++i) axpy_row<V, DV>(acc, p[i], dos + (qid[i] * H + h) * DV);
+      for (int i = 0; i < nb; ++i) axpy_rows<V, HB, DV>(acc, p[i], dost + qid[i] * DV * H + h0, H);
       RANA_UNROLL
       for (int c = 0; c < DV; ++c) acc_v[c] = acc[c];
       keep_in_memory(acc_v);
@@ -605,7 +637,7 @@ RANA_HD void backward_dkdv_block_head(const Op<typename Lanes<V>::T>& op, const 
       V acc[DK];
       RANA_UNROLL
       for (int c = 0; c < DK; ++c) acc[c] = acc_k[c];
-      for (int i = 0; i < nb; ++i) axpy_row<V, DK>(acc, s[i], qs + (qid[i] * H + h) * DK);
+      for (int i = 0; i < nb; ++i) axpy_rows<V, HB, DK>(acc, s[i], qst + qid[i] * DK * H + h0, H);
       RANA_UNROLL
       for (int c = 0; c < DK; ++c) acc_k[c] = acc[c];
       keep_in_memory(acc_k);
@@ -615,7 +647,8 @@ RANA_HD void backward_dkdv_block_head(const Op<typename Lanes<V>::T>& op, const 
         V sum = s[i];
         int e = i + 1;
         for (; e < nb && tag[e] == tag[i]; ++e) sum += s[e];
-        for (int u = 0; u < b.n; ++u) dbias_lanes[(u * op.rows.n) * tw + tag[i] + b.rel[u]] += lane(sum, u);
+        for (int u = 0; u < b.n * HB; ++u)
+          dbias_lanes[(u * op.rows.n) * tw + tag[i] + b.rel[u / HB]] += lane(sum, u);
         i = e;
       }
     }
@@ -623,16 +656,16 @@ RANA_HD void backward_dkdv_block_head(const Op<typename Lanes<V>::T>& op, const 
   };
   {
     V kr[DK];
-    load_lanes<V, DK>(k, b, h, H, op.scale, kr);
+    load_lanes<V, HB, DK>(k, b, h0, H, op.scale, kr);
     int r;
     int32_t x;
     int64_t first, last;
     while (walk.next(r, x, first, last)) {
-      const V bv = lane_bias<V>(op.tab, lt, (h * op.rows.n + r) * tw, -x);
+      const V bv = lane_bias<V>(op.tab, lt, r * tw, -x);
       for (int64_t i = first; i < last; ++i) {
         if (nb == NB) flush();
-        RANA_PREFETCH(dos + (i * H + h) * DV);
-        s[nb] = dot_rows<V, DK>(kr, qs + (i * H + h) * DK, bv);
+        RANA_PREFETCH(dost + i * DV * H);
+        s[nb] = dot_rows<V, HB, DK>(kr, qst + i * DK * H + h0, H, bv);
         qid[nb] = i;
         tag[nb++] = r * tw + o - x;
       }
@@ -641,8 +674,8 @@ RANA_HD void backward_dkdv_block_head(const Op<typename Lanes<V>::T>& op, const 
   flush();
   RANA_UNROLL
   for (int c = 0; c < DK; ++c) acc_k[c] *= op.scale;
-  store_lanes<V, DK>(acc_k, b, h, H, dk);
-  store_lanes<V, DV>(acc_v, b, h, H, dv);
+  store_lanes<V, HB, DK>(acc_k, b, h0, H, dk);
+  store_lanes<V, HB, DV>(acc_v, b, h0, H, dv);
   (void)L;
 }
 

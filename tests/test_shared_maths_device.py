@@ -17,25 +17,27 @@ CUDA_DIR = Path(__file__).resolve().parents[1] / "cuda"
 SMOKE = r"""
 #include "rana_math.h"
 using namespace rana;
-// One thread per entry, L = 1: the same block bodies the CPU kernels run with L = 16.
-__global__ void smoke(Op<float> op, const float* q, const float* k, const float* v, const float* dout,
-                      const float* lse, const float* delta, const int64_t* qpix, const int64_t* q_ptr, float* out,
-                      float* lse_out, float* dq, float* dk, float* dv, float* dbias_lanes, int n) {
+// One thread per (entry, head), L = 1: the same block bodies the CPU kernels run with 16 lanes.
+__global__ void smoke(Op<float> op, const float* q, const float* kt, const float* vt, const float* dout,
+                      const float* lse, const float* delta, const float* qst, const float* dost, const float* k,
+                      const float* v, const int64_t* qpix, const int64_t* q_ptr, float* out, float* lse_out,
+                      float* dq, float* dk, float* dv, float* dbias_lanes, int n) {
   const int i = blockIdx.x * blockDim.x + threadIdx.x;
-  if (i >= n) return;
+  if (i >= n * op.H) return;
+  const int e = i / op.H, h = i % op.H;
   Block<1> b;
-  b.y = qpix[2 * i];
-  b.x0 = qpix[2 * i + 1];
+  b.y = qpix[2 * e];
+  b.x0 = qpix[2 * e + 1];
   b.span = 0;
   b.n = 1;
-  b.id[0] = i;
+  b.id[0] = e;
   b.rel[0] = 0;
-  const LaneTable<1> lq = lane_table(b, op.rows, op.H, 1), lk = lane_table(b, op.rows, op.H, -1);
+  const LaneTable<1> lq = lane_table<1, 1>(b, op.rows, op.H, h, 1), lk = lane_table<1, 1>(b, op.rows, op.H, h, -1);
   const PixelWalk keys{op.g, op.rows, op.g.offsets, 1, b.y, b.x0, 0};
   const PixelWalk queries{op.g, op.rows, q_ptr, -1, b.y, b.x0, 0};
-  forward_block_head<float, 16, 16, 32>(op, b, lq, keys, 0, q, k, v, out, lse_out);
-  backward_dq_block_head<float, 16, 16, 32>(op, b, lq, keys, 0, q, dout, lse, delta, k, v, dq);
-  backward_dkdv_block_head<float, 16, 16, 32>(op, b, lk, queries, 0, q, dout, lse, delta, k, v, dk, dv, dbias_lanes);
+  forward_block<float, 1, 16, 16, 32>(op, b, lq, keys, h, q, kt, vt, out, lse_out);
+  backward_dq_block<float, 1, 16, 16, 32>(op, b, lq, keys, h, q, dout, lse, delta, kt, vt, dq);
+  backward_dkdv_block<float, 1, 16, 16, 32>(op, b, lk, queries, h, qst, dost, lse, delta, k, v, dk, dv, dbias_lanes);
 }
 """
 

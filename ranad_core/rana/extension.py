@@ -1,4 +1,4 @@
-"""Build and load the C++ RaNA kernels (``cuda/rana_cpu.cpp``) with torch's JIT extension builder.
+"""Build and load the C++ RaNA kernels (``cuda/rana_cpu*.cpp``) with torch's JIT extension builder.
 
 Built on first use and cached by torch (``$TORCH_EXTENSIONS_DIR``, default ``~/.cache/torch_extensions``),
 so later runs load in milliseconds. The build is tuned for the CPU it runs on (``-march=native``); the
@@ -17,8 +17,9 @@ from functools import lru_cache
 from pathlib import Path
 
 SOURCE_DIR = Path(__file__).resolve().parents[2] / "cuda"
-CPU_SOURCES = ("rana_cpu.cpp",)
-CPU_HEADERS = ("rana_math.h",)
+# the bindings, and the kernel instantiations split so that the build runs them in parallel
+CPU_SOURCES = ("rana_cpu.cpp", "rana_cpu_f32_hb4.cpp", "rana_cpu_f32_hb1.cpp", "rana_cpu_other.cpp")
+CPU_HEADERS = ("rana_math.h", "rana_cpu_kernels.h")
 
 
 def _cpu_tag() -> str:
