@@ -1,0 +1,57 @@
+"""``ranad synth``: render a dataset of noisy deep frames and their references with ranad's Mitsuba path tracer."""
+
+from __future__ import annotations
+
+import click
+from tqdm import tqdm
+
+from ranad_core.errors import RanadError
+
+
+def _int_list(text: str) -> tuple:
+    try:
+        vals = tuple(int(x) for x in text.split(",") if x.strip())
+    except ValueError:
+        raise click.BadParameter(f"expected comma-separated integers, got {text!r}") from None
+    if not vals or min(vals) < 1:
+        raise click.BadParameter("sample counts must be positive")
+    return vals
+
+
+@click.command("synth")
+@click.option("-o", "--out", "out", required=True, type=click.Path(file_okay=False),
+              help="Dataset folder (created; scenes already complete in it are skipped, so reruns resume).")
+@click.option("--scenes", default=8, show_default=True, type=click.IntRange(1), help="Number of scenes.")
+@click.option("--size", default=128, show_default=True, type=click.IntRange(8, 4096), help="Image width and height.")
+@click.option("--frames", default=3, show_default=True, type=click.IntRange(1, 7), help="Frames per scene.")
+@click.option("--spp", default="4,16,64", show_default=True, help="Noisy sample counts, comma-separated.")
+@click.option("--ref-spp", default=1024, show_default=True, type=click.IntRange(1), help="Reference samples.")
+@click.option("--seed", default=0, show_default=True, type=int, help="Dataset seed: same seed, same files.")
+@click.option("--preset", "presets", multiple=True, type=click.Choice(["easy", "medium", "deep-heavy"]),
+              help="Scene presets, used in turn (default: all three).")
+@click.option("--kind", "kinds", multiple=True, type=click.Choice(["deepz", "deepoid"]),
+              help="Deep kinds to write (default: both).")
+@click.option("--workers", default=1, show_default=True, type=click.IntRange(1), help="Scenes rendered in parallel.")
+def synth_cmd(out, scenes, size, frames, spp, ref_spp, seed, presets, kinds, workers):
+    """Render SCENES procedural animated scenes: every frame at each noisy spp, and the centre frame's
+    reference binned into each noisy image's bins, as deep-Z and deep-OID EXRs with a manifest per scene.
+
+    Needs Mitsuba 3 (pip install 'ranad[synth]') and Debian's libllvm19. See README, "Synthetic data", for the
+    channel convention and the binning rules.
+    """
+    from ranad_core.synth import dataset
+    from ranad_core.synth.mitsuba_env import mitsuba
+    from ranad_core.synth.scene import PRESETS
+
+    mitsuba()  # fail early, with the install hint, before any folder is made
+    cfg = dataset.SynthConfig(out=out, scenes=scenes, size=size, frames=frames, spp=_int_list(spp), ref_spp=ref_spp,
+                              seed=seed, presets=tuple(presets) or PRESETS,
+                              kinds=tuple(kinds) or ("deepz", "deepoid"))
+    skipped = sum(dataset.is_done(cfg, i) for i in range(scenes))
+    try:
+        with tqdm(total=scenes - skipped, desc="synth", unit="scene", disable=scenes - skipped <= 1) as bar:
+            made = dataset.run(cfg, workers, bar.update)
+    except OSError as e:
+        raise RanadError(f"cannot write the dataset ({e.strerror or e})", out) from None
+    secs = sum(m["seconds"] for m in made)
+    click.echo(f"{len(made)} scene(s) written to {out} ({skipped} already complete), {secs:.1f} s of rendering")

@@ -1,0 +1,167 @@
+"""Path samples -> deep pixels (deep-Z or deep-OID), and reference samples into the noisy image's bins.
+
+Rules (documented in README, "Synthetic data"):
+
+* deep-OID: one bin per (pixel, object id) of the samples' first stops; the id goes to the uint32 `id` channel.
+* deep-Z: a pixel's samples are sorted by view depth and a new bin starts wherever consecutive depths differ by
+  more than 3% plus 1 cm (Z_GAP_REL, Z_GAP_ABS); no id channel.
+* Per bin: the mean of every attribute (albedo, normal, position, motion), `coverage` = samples in the bin / spp,
+  Z = ZBack = the mean depth (surfaces are points, not volumes), and radiance-like channels as sums / spp.
+* EXR alpha: bins are ordered front to back and bin i gets A_i = c_i / (1 - sum_{j<i} c_j) with its colours
+  divided by the same (1 - sum_{j<i} c_j), so that compositing the bins "over" each other gives exactly the
+  pixel's mean radiance (the coverages are disjoint sample sets, not layers).
+* The reference is binned INTO the noisy bins: a reference sample goes to the noisy bin of its pixel with the
+  same object id (deep-OID) or whose depth range, widened by the gap rule, holds its depth (deep-Z, nearest
+  bin first). Samples that find no bin are dropped and counted: `unbinned_energy` is their share of the
+  reference radiance. Noisy and reference images therefore have identical bin layouts.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+Z_GAP_REL, Z_GAP_ABS = 0.03, 0.01
+
+# radiance-like sample attributes (summed, premultiplied in the file) and mean attributes
+SUMMED = ("diffuse", "specular", "emission")
+MEANS = ("albedo", "normal", "position", "motion_prev", "motion_next")
+
+
+@dataclass
+class BinLayout:
+    """Bins of one image: pixel of each bin (row-major), bin key (object id or depth cluster), depth range."""
+    width: int
+    height: int
+    pixel: np.ndarray      # int64 [B]
+    obj: np.ndarray        # uint32 [B]: object id (deep-OID) or majority id (deep-Z)
+    zmin: np.ndarray
+    zmax: np.ndarray
+    kind: str              # "oid" or "z"
+
+    @property
+    def offsets(self) -> np.ndarray:
+        counts = np.bincount(self.pixel, minlength=self.width * self.height)
+        return np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
+
+
+def layout_from_samples(s: dict, width: int, height: int, kind: str) -> tuple[BinLayout, np.ndarray]:
+    """The bins of the noisy samples and each sample's bin (-1 for samples that hit nothing)."""
+    hit = np.flatnonzero(s["hit"])
+    pix, z, obj = s["pixel"][hit], s["z"][hit], s["obj"][hit]
+    if kind == "oid":
+        order = np.lexsort((z, obj, pix))
+        key_change = np.ones(len(order), bool)
+        key_change[1:] = (pix[order][1:] != pix[order][:-1]) | (obj[order][1:] != obj[order][:-1])
+    elif kind == "z":
+        order = np.lexsort((z, pix))
+        zs = z[order]
+        key_change = np.ones(len(order), bool)
+        key_change[1:] = (pix[order][1:] != pix[order][:-1]) | (zs[1:] > zs[:-1] * (1 + Z_GAP_REL) + Z_GAP_ABS)
+    else:
+        raise ValueError(f"unknown deep kind {kind!r}")
+    bin_sorted = np.cumsum(key_change) - 1
+    nb = int(bin_sorted[-1]) + 1 if len(order) else 0
+    sample_bin = np.full(len(s["hit"]), -1, np.int64)
+    sample_bin[hit[order]] = bin_sorted
+    b_pix = pix[order][key_change]
+    zsorted = z[order]
+    zmin = np.full(nb, np.inf)
+    zmax = np.full(nb, -np.inf)
+    np.minimum.at(zmin, bin_sorted, zsorted)
+    np.maximum.at(zmax, bin_sorted, zsorted)
+    if kind == "oid":
+        b_obj = obj[order][key_change]
+    else:  # majority object of each depth cluster (kept for motion checks, not written)
+        pairs = bin_sorted.astype(np.int64) * (int(obj.max(initial=0)) + 1) + obj[order]
+        uniq, cnt = np.unique(pairs, return_counts=True)
+        best = np.zeros(nb, np.int64)
+        best_cnt = np.zeros(nb, np.int64)
+        b_of = uniq // (int(obj.max(initial=0)) + 1)
+        for b, o, c in zip(b_of, uniq % (int(obj.max(initial=0)) + 1), cnt):
+            if c > best_cnt[b]:
+                best[b], best_cnt[b] = o, c
+        b_obj = best.astype(np.uint32)
+    # bins ordered by pixel, then front to back
+    ord2 = np.lexsort((zmin, b_pix))
+    remap = np.empty(nb, np.int64)
+    remap[ord2] = np.arange(nb)
+    sample_bin = np.where(sample_bin >= 0, remap[np.maximum(sample_bin, 0)], -1)
+    lay = BinLayout(width, height, b_pix[ord2].astype(np.int64), np.asarray(b_obj)[ord2].astype(np.uint32),
+                    zmin[ord2], zmax[ord2], kind)
+    return lay, sample_bin
+
+
+def assign_to_layout(s: dict, lay: BinLayout) -> np.ndarray:
+    """Each (reference) sample's bin in an existing layout, -1 when none matches."""
+    out = np.full(len(s["hit"]), -1, np.int64)
+    hit = np.flatnonzero(s["hit"])
+    if len(lay.pixel) == 0 or len(hit) == 0:
+        return out
+    pix, z, obj = s["pixel"][hit], s["z"][hit], s["obj"][hit]
+    if lay.kind == "oid":
+        big = np.uint64(1 << 32)
+        keys = lay.pixel.astype(np.uint64) * big + lay.obj.astype(np.uint64)
+        order = np.argsort(keys, kind="stable")
+        q = pix.astype(np.uint64) * big + obj.astype(np.uint64)
+        pos = np.searchsorted(keys[order], q)
+        pos_c = np.minimum(pos, len(keys) - 1)
+        ok = keys[order][pos_c] == q
+        out[hit[ok]] = order[pos_c[ok]]
+        return out
+    lo = lay.zmin / (1 + Z_GAP_REL) - Z_GAP_ABS
+    hi = lay.zmax * (1 + Z_GAP_REL) + Z_GAP_ABS
+    offs = lay.offsets
+    # candidate: the last bin of the pixel whose lower bound <= z (bins are front to back within a pixel)
+    scale = 1e6
+    keys = lay.pixel.astype(np.float64) * scale + np.clip(lo, -1e3, 1e5 - 1) / 1e5 * (scale * 0.5)
+    q = pix.astype(np.float64) * scale + np.clip(z, -1e3, 1e5 - 1) / 1e5 * (scale * 0.5)
+    pos = np.searchsorted(keys, q, side="right") - 1
+    first_of_pixel = offs[pix]
+    ok = (pos >= first_of_pixel) & (pos < offs[pix + 1])
+    pos_c = np.clip(pos, 0, len(keys) - 1)
+    ok &= z <= hi[pos_c]
+    out[hit[ok]] = pos_c[ok]
+    return out
+
+
+def accumulate(s: dict, sample_bin: np.ndarray, nbins: int, acc: dict | None = None) -> dict:
+    """Adds per-bin sums (count, summed channels, sums of mean channels, depth sum) of samples into acc."""
+    if acc is None:
+        acc = {"count": np.zeros(nbins), "z": np.zeros(nbins), "unbinned": 0.0, "total": 0.0}
+    ok = sample_bin >= 0
+    b = sample_bin[ok]
+    acc["count"] += np.bincount(b, minlength=nbins)
+    acc["z"] += np.bincount(b, weights=s["z"][ok], minlength=nbins)
+    names = [n for n in SUMMED + MEANS if n in s] + ["groups"]
+    for name in names:
+        val = s[name][ok].reshape(int(ok.sum()), -1)
+        sums = np.stack([np.bincount(b, weights=val[:, c], minlength=nbins) for c in range(val.shape[1])], 1)
+        acc[name] = acc.get(name, 0) + sums
+    total = sum(s[n] for n in SUMMED).sum(axis=1)
+    acc["unbinned"] += float(total[~ok].sum())
+    acc["total"] += float(total.sum())
+    return acc
+
+
+def bin_values(acc: dict, lay: BinLayout, spp: int) -> dict:
+    """Per-bin channel values from accumulated sums: coverage, EXR alpha, premultiplied radiance, means."""
+    count = acc["count"]
+    cov = count / spp
+    offs = lay.offsets
+    # coverage of the bins in front of each bin, within its pixel
+    before = np.cumsum(cov) - cov
+    before -= np.repeat(np.append(before, 0.0)[offs[:-1]], np.diff(offs))
+    room = np.maximum(1.0 - before, 1e-12)
+    safe = np.maximum(count, 1)[:, None]
+    out = {"coverage": cov, "A": np.clip(cov / room, 0.0, 1.0)}
+    for name in SUMMED + ("groups",):
+        out[name] = acc[name] / spp / room[:, None]
+    for name in MEANS:
+        if name in acc:
+            out[name] = acc[name] / safe
+    mean_z = acc["z"] / np.maximum(count, 1)
+    out["Z"] = np.where(count > 0, mean_z, 0.5 * (lay.zmin + lay.zmax))
+    out["unbinned_energy"] = acc["unbinned"] / acc["total"] if acc["total"] > 0 else 0.0
+    return out

@@ -1,0 +1,126 @@
+"""One scene's frames: trace samples, add motion vectors, bin them, and build the deep images ranad writes.
+
+Channel convention (also what `ranad denoise` expects by default; README "Synthetic data"):
+``R G B A`` (half, premultiplied, EXR alpha), ``Z ZBack`` (float), ``diffuse.* specular.* emission.*`` (half,
+premultiplied like RGB; they sum to RGB), ``lg_<group>.R/G/B`` (half, premultiplied; they sum to RGB),
+``albedo.R/G/B`` and ``N.X/Y/Z`` (half, per-bin means), ``P.X/Y/Z`` (float, world position), ``coverage``
+(half, the bin's share of the pixel's samples), ``motion_prev.X/Y`` and ``motion_next.X/Y`` (float, pixels to the
+bin's position in the previous/next frame; 0 where that frame does not exist), and ``id`` (uint, deep-OID).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ..deep import DeepImage
+from .binning import BinLayout, accumulate, assign_to_layout, bin_values, layout_from_samples
+from .scene import SceneSpec, look_at
+from .trace import load_frame, trace
+
+CHUNK = 1 << 20   # samples traced per call (bounds the memory of one reference frame)
+
+
+def project(spec: SceneSpec, frame: int, points: np.ndarray) -> np.ndarray:
+    """Film coordinates (x, y in pixels, y down) of world points seen by the camera of `frame` (pinhole model)."""
+    cam = look_at(spec.camera.origin[frame], spec.camera.target[frame])
+    local = (points - cam[:3, 3]) @ cam[:3, :3]  # camera space: x left, y up, z forward
+    tan_x = math.tan(math.radians(spec.camera.fov) / 2)
+    tan_y = tan_x * spec.height / spec.width
+    z = np.maximum(local[:, 2], 1e-6)
+    x = (1 - local[:, 0] / (z * tan_x)) * 0.5 * spec.width
+    y = (1 - local[:, 1] / (z * tan_y)) * 0.5 * spec.height
+    return np.stack([x, y], 1)
+
+
+def add_motion(spec: SceneSpec, frame: int, s: dict) -> None:
+    """Per-sample motion vectors to the previous and next frame from the hit object's transforms."""
+    pos = s["position"].astype(np.float64)
+    here = project(spec, frame, pos)
+    mats = {o.id: [np.asarray(m) for m in o.transforms] for o in spec.objects}
+    for name, other in (("motion_prev", frame - 1), ("motion_next", frame + 1)):
+        mv = np.zeros((len(pos), 2), np.float32)
+        if 0 <= other < spec.frames:
+            moved = pos.copy()
+            for oid in np.unique(s["obj"][s["hit"]]):
+                sel = s["hit"] & (s["obj"] == oid)
+                m = mats[int(oid)][other] @ np.linalg.inv(mats[int(oid)][frame])
+                moved[sel] = pos[sel] @ m[:3, :3].T + m[:3, 3]
+            mv = (project(spec, other, moved) - here).astype(np.float32)
+            mv[~s["hit"]] = 0
+        s[name] = mv
+
+
+def trace_all(fs, spp: int, seed: int) -> dict:
+    n = fs.spec.width * fs.spec.height * spp
+    parts = [trace(fs, spp, seed, start, min(CHUNK, n - start)) for start in range(0, n, CHUNK)]
+    return {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
+
+
+def deep_image(spec: SceneSpec, lay: BinLayout, vals: dict, with_motion: bool) -> DeepImage:
+    """The DeepImage of a layout and its per-bin values, in the channel convention above."""
+    cols, types = {}, {}
+
+    def put(name, data, typ="half"):
+        cols[name] = np.asarray(data, np.float32)
+        types[name] = typ
+
+    total = vals["diffuse"] + vals["specular"] + vals["emission"]
+    for i, c in enumerate("RGB"):
+        put(c, total[:, i])
+    put("A", vals["A"])
+    put("Z", vals["Z"], "float")
+    put("ZBack", vals["Z"], "float")
+    for layer in ("diffuse", "specular", "emission"):
+        for i, c in enumerate("RGB"):
+            put(f"{layer}.{c}", vals[layer][:, i])
+    for g, gname in enumerate(spec.light_groups):
+        for i, c in enumerate("RGB"):
+            put(f"lg_{gname}.{c}", vals["groups"][:, g * 3 + i])
+    for i, c in enumerate("RGB"):
+        put(f"albedo.{c}", vals["albedo"][:, i])
+    for i, c in enumerate("XYZ"):
+        put(f"N.{c}", vals["normal"][:, i])
+    for i, c in enumerate("XYZ"):
+        put(f"P.{c}", vals["position"][:, i], "float")
+    put("coverage", vals["coverage"])
+    if with_motion:
+        for name in ("motion_prev", "motion_next"):
+            for i, c in enumerate("XY"):
+                put(f"{name}.{c}", vals[name][:, i], "float")
+    ids = {}
+    if lay.kind == "oid":
+        ids["id"] = lay.obj.astype(np.uint32)
+        types["id"] = "uint"
+    names = list(cols)
+    values = np.stack([cols[n] for n in names], 1) if names else np.zeros((0, 0), np.float32)
+    return DeepImage(values=values, offsets=lay.offsets, channels=names, ids=ids,
+                     data_window=(0, 0, spec.width - 1, spec.height - 1),
+                     display_window=(0, 0, spec.width - 1, spec.height - 1), channel_types=types)
+
+
+def render_noisy(spec: SceneSpec, frame: int, spp: int, kind: str, seed: int, fs=None):
+    """(DeepImage, layout, samples) of one noisy frame."""
+    fs = fs or load_frame(spec, frame)
+    s = trace_all(fs, spp, seed)
+    add_motion(spec, frame, s)
+    lay, sample_bin = layout_from_samples(s, spec.width, spec.height, kind)
+    vals = bin_values(accumulate(s, sample_bin, len(lay.pixel)), lay, spp)
+    return deep_image(spec, lay, vals, True), lay, s
+
+
+def render_reference(spec: SceneSpec, frame: int, ref_spp: int, layouts: list, seed: int, fs=None):
+    """References of one frame binned into each of `layouts` (one tracing pass): [(DeepImage, unbinned share)]."""
+    fs = fs or load_frame(spec, frame)
+    n = spec.width * spec.height * ref_spp
+    accs = [None] * len(layouts)
+    for start in range(0, n, CHUNK):
+        s = trace(fs, ref_spp, seed, start, min(CHUNK, n - start))
+        for i, lay in enumerate(layouts):
+            accs[i] = accumulate(s, assign_to_layout(s, lay), len(lay.pixel), accs[i])
+    out = []
+    for lay, acc in zip(layouts, accs):
+        vals = bin_values(acc, lay, ref_spp)
+        out.append((deep_image(spec, lay, vals, False), vals["unbinned_energy"]))
+    return out

@@ -1,0 +1,222 @@
+"""Procedural animated scenes for training data: a plain-Python description, then one Mitsuba scene per frame.
+
+Mitsuba 3 has no animated transforms, so a scene is described here with every object's 4x4 to-world matrix per
+frame (the table the motion vectors are computed from) and rebuilt for each frame. Presets stress what makes deep
+images hard: semi-transparent panes, alpha-cut "foliage" cards, thin cylinders, objects at close depths, depth
+of field, glossy and diffuse materials, several light groups and empty background.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+PRESETS = ("easy", "medium", "deep-heavy")
+CUTOUT_NONE, CUTOUT_LEAF = 0, 1
+
+
+@dataclass
+class SceneObject:
+    id: int                      # object id written to the deep-OID `id` channel (1, 2, ...; 0 = nothing)
+    kind: str                    # sphere | cube | rectangle | cylinder
+    bsdf: dict                   # Mitsuba BSDF dictionary
+    transforms: list             # 4x4 to-world matrix per frame
+    opacity: float = 1.0         # < 1: a sample passes through with probability 1 - opacity (semi-transparent)
+    cutout: int = CUTOUT_NONE    # alpha-textured card pattern
+    radiance: tuple | None = None  # area emitter radiance (an object that is a light)
+    light_group: int = -1        # index into SceneSpec.light_groups for emitters
+
+
+@dataclass
+class Camera:
+    origin: list                 # per frame, xyz
+    target: list                 # per frame, xyz
+    fov: float = 40.0
+    aperture: float = 0.0        # thin-lens aperture radius (0: pinhole)
+    focus: float = 5.0
+
+
+@dataclass
+class SceneSpec:
+    seed: int
+    preset: str
+    width: int
+    height: int
+    frames: int
+    camera: Camera
+    objects: list = field(default_factory=list)
+    light_groups: list = field(default_factory=list)
+
+    def object(self, oid: int) -> SceneObject:
+        return next(o for o in self.objects if o.id == oid)
+
+
+# ---- transforms ---------------------------------------------------------------------------------------
+def translate(v) -> np.ndarray:
+    m = np.eye(4)
+    m[:3, 3] = v
+    return m
+
+
+def scale(s) -> np.ndarray:
+    return np.diag([*np.broadcast_to(np.asarray(s, float), (3,)), 1.0])
+
+
+def rotate(axis, degrees: float) -> np.ndarray:
+    a = np.asarray(axis, float)
+    a = a / np.linalg.norm(a)
+    t = math.radians(degrees)
+    c, s = math.cos(t), math.sin(t)
+    x, y, z = a
+    r = np.array([[c + x * x * (1 - c), x * y * (1 - c) - z * s, x * z * (1 - c) + y * s],
+                  [y * x * (1 - c) + z * s, c + y * y * (1 - c), y * z * (1 - c) - x * s],
+                  [z * x * (1 - c) - y * s, z * y * (1 - c) + x * s, c + z * z * (1 - c)]])
+    m = np.eye(4)
+    m[:3, :3] = r
+    return m
+
+
+def look_at(origin, target, up=(0.0, 1.0, 0.0)) -> np.ndarray:
+    """Camera to-world matrix in Mitsuba's convention (camera looks along +z, x to the left)."""
+    o, t, u = (np.asarray(v, float) for v in (origin, target, up))
+    d = t - o
+    d /= np.linalg.norm(d)
+    left = np.cross(u, d)
+    left /= np.linalg.norm(left)
+    new_up = np.cross(d, left)
+    m = np.eye(4)
+    m[:3, 0], m[:3, 1], m[:3, 2], m[:3, 3] = left, new_up, d, o
+    return m
+
+
+# ---- materials ------------------------------------------------------------------------------------------
+def _rgb(rng: np.random.Generator, lo=0.1, hi=0.9) -> list:
+    return [float(x) for x in rng.uniform(lo, hi, 3)]
+
+
+def _bsdf(rng: np.random.Generator, glossy_prob: float) -> dict:
+    r = rng.random()
+    if r < glossy_prob * 0.5:
+        return {"type": "roughplastic", "distribution": "ggx", "alpha": float(rng.uniform(0.05, 0.3)),
+                "diffuse_reflectance": {"type": "rgb", "value": _rgb(rng)}}
+    if r < glossy_prob:
+        return {"type": "roughconductor", "material": "none", "alpha": float(rng.uniform(0.08, 0.35)),
+                "specular_reflectance": {"type": "rgb", "value": _rgb(rng, 0.4, 0.95)}}
+    return {"type": "diffuse", "reflectance": {"type": "rgb", "value": _rgb(rng)}}
+
+
+# ---- the generator -------------------------------------------------------------------------------------
+PRESET_PARAMS = {
+    # objects, panes, cards, thin, glossy share, DOF probability, motion scale
+    "easy": dict(objects=(3, 5), panes=(0, 0), cards=(0, 0), thin=(0, 1), glossy=0.2, dof=0.0, motion=0.6),
+    "medium": dict(objects=(4, 7), panes=(1, 2), cards=(1, 3), thin=(1, 2), glossy=0.4, dof=0.3, motion=1.0),
+    "deep-heavy": dict(objects=(5, 8), panes=(2, 4), cards=(4, 8), thin=(2, 4), glossy=0.5, dof=0.6,
+                       motion=1.0),
+}
+
+
+def _animated(base: np.ndarray, frames: int, velocity, spin_axis, spin_deg: float) -> list:
+    """Per-frame to-world matrices: base, rotated about its own centre and moved by `velocity` per frame."""
+    centre = base[:3, 3].copy()
+    out = []
+    for f in range(frames):
+        t = f - (frames - 1) / 2
+        m = translate(centre + np.asarray(velocity) * t) @ rotate(spin_axis, spin_deg * t) @ translate(-centre) @ base
+        out.append(m)
+    return out
+
+
+def make_scene(seed: int, preset: str = "medium", size: int = 128, frames: int = 3) -> SceneSpec:
+    """A random animated scene, fully determined by (seed, preset, size, frames)."""
+    if preset not in PRESET_PARAMS:
+        raise ValueError(f"unknown preset {preset!r} (one of {', '.join(PRESETS)})")
+    p = PRESET_PARAMS[preset]
+    rng = np.random.default_rng(seed)
+    m = p["motion"]
+    cam_o = np.array([rng.uniform(-1.0, 1.0), rng.uniform(1.0, 2.2), rng.uniform(6.0, 7.5)])
+    cam_t = np.array([rng.uniform(-0.4, 0.4), rng.uniform(0.4, 0.9), 0.0])
+    cam_v = rng.normal(0, 0.06 * m, 3)
+    camera = Camera(origin=[list(cam_o + cam_v * (f - (frames - 1) / 2)) for f in range(frames)],
+                    target=[list(cam_t) for _ in range(frames)], fov=float(rng.uniform(32, 45)))
+    if rng.random() < p["dof"]:
+        camera.aperture = float(rng.uniform(0.03, 0.12))
+        camera.focus = float(np.linalg.norm(cam_o - cam_t) + rng.uniform(-1.0, 1.0))
+    spec = SceneSpec(seed=seed, preset=preset, width=size, height=size, frames=frames, camera=camera,
+                     light_groups=["key", "fill", "rim"][: int(rng.integers(2, 4))])
+    next_id = iter(range(1, 1000))
+
+    def add(kind, bsdf, base, *, vel=None, spin=0.0, **kw):
+        vel = rng.normal(0, 0.12 * m, 3) if vel is None else vel
+        axis = rng.normal(size=3)
+        spec.objects.append(SceneObject(next(next_id), kind, bsdf,
+                                        _animated(base, frames, vel, axis, spin), **kw))
+
+    # ground (static), kept below everything; some presets leave background pixels empty above the horizon
+    add("rectangle", _bsdf(rng, 0.1), translate([0, 0, 0]) @ rotate([1, 0, 0], -90) @ scale(8), vel=np.zeros(3))
+    for _ in range(int(rng.integers(*p["objects"], endpoint=True))):
+        kind = str(rng.choice(["sphere", "cube", "sphere", "cylinder"]))
+        s = rng.uniform(0.25, 0.6)
+        pos = [rng.uniform(-2.2, 2.2), s, rng.uniform(-2.0, 2.0)]
+        base = translate(pos) @ rotate(rng.normal(size=3), rng.uniform(0, 180)) @ scale([s, s, s * (3 if kind == "cylinder" else 1)])
+        add(kind, _bsdf(rng, p["glossy"]), base, spin=float(rng.uniform(-15, 15) * m))
+    for _ in range(int(rng.integers(*p["thin"], endpoint=True))):  # thin poles
+        r = rng.uniform(0.015, 0.04)
+        pos = [rng.uniform(-2.5, 2.5), 0.0, rng.uniform(-1.5, 2.5)]
+        base = translate(pos) @ rotate([1, 0, 0], -90 + rng.uniform(-20, 20)) @ scale([r, r, rng.uniform(1.2, 2.5)])
+        add("cylinder", _bsdf(rng, 0.3), base)
+    for _ in range(int(rng.integers(*p["panes"], endpoint=True))):  # semi-transparent panes
+        pos = [rng.uniform(-1.8, 1.8), rng.uniform(0.5, 1.3), rng.uniform(-0.5, 3.0)]
+        base = translate(pos) @ rotate([0, 1, 0], rng.uniform(-50, 50)) @ scale([rng.uniform(0.5, 1.1), rng.uniform(0.4, 0.9), 1])
+        add("rectangle", {"type": "twosided", "bsdf": _bsdf(rng, 0.3)}, base, opacity=float(rng.uniform(0.2, 0.6)))
+    for _ in range(int(rng.integers(*p["cards"], endpoint=True))):  # alpha-cut foliage cards, often overlapping
+        pos = [rng.uniform(-2.0, 2.0), rng.uniform(0.3, 1.6), rng.uniform(-1.0, 3.5)]
+        base = translate(pos) @ rotate(rng.normal(size=3), rng.uniform(0, 60)) @ scale(rng.uniform(0.2, 0.45))
+        leaf = {"type": "twosided", "bsdf": {"type": "diffuse",
+                                             "reflectance": {"type": "rgb", "value": _rgb(rng, 0.05, 0.5)}}}
+        add("rectangle", leaf, base, cutout=CUTOUT_LEAF, spin=float(rng.uniform(-25, 25) * m))
+    # area lights, one light group each (several lights may share a group)
+    for g, _name in enumerate(spec.light_groups):
+        for _ in range(1 if g else int(rng.integers(1, 3))):
+            pos = [rng.uniform(-4, 4), rng.uniform(3.0, 5.0), rng.uniform(-3, 4)]
+            base = look_at(pos, [0, 0.5, 0]) @ scale(rng.uniform(0.3, 0.8))
+            power = rng.uniform(4, 14) if g == 0 else rng.uniform(1.5, 6)
+            col = np.clip(rng.normal(1.0, 0.15, 3), 0.6, 1.4) * power
+            add("rectangle", {"type": "diffuse"}, base, vel=np.zeros(3),
+                radiance=tuple(float(c) for c in col), light_group=g)
+    return spec
+
+
+def mitsuba_dict(spec: SceneSpec, frame: int) -> dict:
+    """The Mitsuba scene dictionary of one frame (no integrator: ranad traces its own paths)."""
+    cam = spec.camera
+    to_world = look_at(cam.origin[frame], cam.target[frame])
+    sensor = {"type": "thinlens" if cam.aperture > 0 else "perspective", "fov": cam.fov,
+              "to_world": to_world.tolist(),
+              "film": {"type": "hdrfilm", "width": spec.width, "height": spec.height, "rfilter": {"type": "box"}}}
+    if cam.aperture > 0:
+        sensor["aperture_radius"] = cam.aperture
+        sensor["focus_distance"] = cam.focus
+    d = {"type": "scene", "sensor": sensor}
+    for o in spec.objects:
+        shape = {"type": o.kind, "to_world": np.asarray(o.transforms[frame]).tolist(), "bsdf": o.bsdf}
+        if o.radiance is not None:
+            shape["emitter"] = {"type": "area", "radiance": {"type": "rgb", "value": list(o.radiance)}}
+        d[f"obj{o.id}"] = shape
+    return d
+
+
+def convert_transforms(d: dict) -> dict:
+    """Replaces the nested-list matrices of mitsuba_dict by Mitsuba transforms (needs the variant loaded)."""
+    from .mitsuba_env import mitsuba
+
+    mi = mitsuba()
+    out = {}
+    for key, val in d.items():
+        if isinstance(val, dict):
+            val = convert_transforms(val)
+        if key == "to_world":
+            val = mi.ScalarTransform4f(np.asarray(val, dtype=np.float64).tolist())
+        out[key] = val
+    return out

@@ -1,0 +1,221 @@
+"""The path tracer behind `ranad synth`: one Dr.Jit loop (Mitsuba 3, ``llvm_ad_rgb``) returning every sample.
+
+For each camera sample it returns what deep binning needs: the pixel and sub-pixel position; the FIRST STOP
+(the first surface the sample stops at: view depth, distance, object id, whether anything was hit, albedo,
+shading normal, world position); and its radiance split three ways and by light group:
+
+* emission seen directly at the first stop;
+* diffuse and specular: everything else, split at the first stop by lobe. Next-event estimation there evaluates
+  the BSDF's diffuse and glossy parts separately; the BSDF-sampled continuation is weighted by
+  f_diffuse/pdf and f_glossy/pdf (one sample, both parts), so each part is unbiased and they sum to the total;
+* per light group: every contribution (emission hit or light sample) is added to the group of its emitter, so
+  the groups sum to diffuse + specular + emission.
+
+Semi-transparent surfaces: at every intersection a sample first decides whether it passes through (probability
+1 - opacity, times an alpha cutout for foliage cards), before any shading, so all of a sample's radiance
+belongs to the surface where it stops. Shadow rays treat every surface as opaque (panes cast full shadows);
+noisy and reference renders share that rule. Paths are traced with next-event estimation and MIS up to
+`max_depth` bounces; the background is black and empty.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .mitsuba_env import mitsuba
+from .scene import CUTOUT_LEAF, SceneSpec, convert_transforms, look_at, mitsuba_dict
+
+MAX_PASS_THROUGH = 16   # surfaces a sample may pass through before it is stopped at the next one
+MAX_GROUPS = 3          # light groups the loop carries
+
+
+@dataclass
+class FrameScene:
+    """A loaded Mitsuba scene of one frame plus the tables that map Mitsuba's shapes to ranad's objects."""
+    mi_scene: object
+    spec: SceneSpec
+    frame: int
+    object_of_shape: np.ndarray   # registry id -> object id (0: none)
+    opacity_of_shape: np.ndarray  # registry id -> opacity
+    cutout_of_shape: np.ndarray   # registry id -> cutout pattern
+    group_of_emitter: np.ndarray  # registry id -> light group (-1: none)
+    cam_origin: np.ndarray
+    cam_forward: np.ndarray
+
+
+def load_frame(spec: SceneSpec, frame: int) -> FrameScene:
+    mi = mitsuba()
+    import drjit as dr
+
+    scene = mi.load_dict(convert_transforms(mitsuba_dict(spec, frame)))
+    shapes = scene.shapes()
+    regs = [int(dr.reinterpret_array(mi.UInt32, mi.ShapePtr(s))[0]) for s in shapes]
+    size = max(regs + [0]) + 1
+    obj = np.zeros(size, np.uint32)
+    opac = np.ones(size, np.float32)
+    cut = np.zeros(size, np.uint32)
+    group_size = 1
+    em_groups = {}
+    for s, reg in zip(shapes, regs):
+        o = spec.object(int(s.id()[3:]))
+        obj[reg], opac[reg], cut[reg] = o.id, o.opacity, o.cutout
+        if s.emitter() is not None:
+            em_reg = int(dr.reinterpret_array(mi.UInt32, mi.EmitterPtr(s.emitter()))[0])
+            em_groups[em_reg] = o.light_group
+            group_size = max(group_size, em_reg + 1)
+    groups = np.full(group_size, -1, np.int32)
+    for reg, g in em_groups.items():
+        groups[reg] = g
+    cam = look_at(spec.camera.origin[frame], spec.camera.target[frame])
+    return FrameScene(scene, spec, frame, obj, opac, cut, groups, cam[:3, 3].copy(), cam[:3, 2].copy())
+
+
+def trace(fs: FrameScene, spp: int, seed: int, start: int, count: int, max_depth: int = 4) -> dict:
+    """Samples start..start+count-1 of the frame (sample i belongs to pixel i // spp), as numpy arrays."""
+    mi = mitsuba()
+    import drjit as dr
+
+    spec = fs.spec
+    W, H = spec.width, spec.height
+    idx = dr.arange(mi.UInt32, count) + dr.opaque(mi.UInt32, start)
+    pix = idx // dr.opaque(mi.UInt32, spp)
+    # streams differ per sample index and per seed; opaque seeds keep the compiled kernel reusable
+    rng = mi.PCG32(count, initstate=dr.opaque(mi.UInt64, seed * 2654435761 + 12345), initseq=mi.UInt64(idx))
+    sx, sy = rng.next_float32(), rng.next_float32()
+    px, py = mi.Float(pix % W) + sx, mi.Float(pix // W) + sy
+    sensor = fs.mi_scene.sensors()[0]
+    ray, _ = sensor.sample_ray(0.0, 0.5, mi.Point2f(px / W, py / H), mi.Point2f(rng.next_float32(), rng.next_float32()))
+    tables = (mi.UInt32(fs.object_of_shape), mi.Float(fs.opacity_of_shape), mi.UInt32(fs.cutout_of_shape),
+              mi.Int32(fs.group_of_emitter))
+    out = _loop(mi, dr, fs.mi_scene, ray, rng, tables, mi.Point3f(*map(float, fs.cam_origin)), mi.Vector3f(*map(float, fs.cam_forward)),
+                max_depth)
+    dr.eval(out)
+    res = {"pixel": np.asarray(pix, dtype=np.int64), "sx": np.asarray(sx), "sy": np.asarray(sy)}
+    for name, val in out.items():
+        a = np.asarray(val)
+        res[name] = a.T.copy() if a.ndim == 2 and a.shape[0] == 3 else a
+    res["groups"] = np.stack([res.pop(f"group{g}") for g in range(MAX_GROUPS)], axis=1)[:, : len(spec.light_groups)]
+    res["hit"] = res["hit"].astype(bool)
+    return res
+
+
+def _leaf_alpha(mi, dr, uv):
+    """A foliage-card cutout on the card's uv square: an ellipse cut by gaps between leaflets."""
+    u, v = uv.x, uv.y
+    ell = dr.square((u - 0.5) / 0.47) + dr.square((v - 0.5) / 0.3) < 1.0
+    gaps = (dr.abs(v - 0.5) < 0.03) | ((u * 6.0 - dr.floor(u * 6.0)) < 0.12)
+    return dr.select(ell & ~gaps, 1.0, 0.0)
+
+
+def _mis(a, b):
+    import drjit as dr
+
+    a2 = dr.square(a)
+    return dr.detach(dr.select(a > 0, a2 / (a2 + dr.square(b)), 0.0))
+
+
+def _loop(mi, dr, scene, ray, rng, tables, cam_o, cam_f, max_depth):
+    obj_t, opac_t, cut_t, grp_t = tables
+    n = dr.width(ray.o)
+    black = mi.Color3f(0.0)
+    ctx = mi.BSDFContext()
+    ctx_d = mi.BSDFContext()
+    ctx_d.type_mask = mi.BSDFFlags.Diffuse
+    ctx_s = mi.BSDFContext()
+    ctx_s.type_mask = mi.BSDFFlags.Glossy | mi.BSDFFlags.Delta
+    state = dict(
+        ray=mi.Ray3f(ray), active=mi.Bool(True), first=mi.Bool(True), depth=mi.UInt32(0), passes=mi.UInt32(0),
+        beta_d=mi.Color3f(0.0), beta_s=mi.Color3f(0.0), prev_si=dr.zeros(mi.SurfaceInteraction3f, n),
+        prev_pdf=mi.Float(1.0), prev_delta=mi.Bool(True), dist=mi.Float(0.0),
+        diffuse=mi.Color3f(0.0), specular=mi.Color3f(0.0), emission=mi.Color3f(0.0),
+        group0=mi.Color3f(0.0), group1=mi.Color3f(0.0), group2=mi.Color3f(0.0),
+        hit=mi.Bool(False), obj=mi.UInt32(0), z=mi.Float(0.0), distance=mi.Float(0.0), albedo=mi.Color3f(0.0),
+        normal=mi.Vector3f(0.0), position=mi.Point3f(0.0), rng=rng)
+
+    def add_group(st, g, value, mask):
+        for k in range(MAX_GROUPS):
+            st[f"group{k}"] = dr.select(mask & (g == k), st[f"group{k}"] + value, st[f"group{k}"])
+
+    def body(st):
+        r = st["rng"]
+        active = st["active"]
+        si = scene.ray_intersect(st["ray"], mi.RayFlags.All, st["depth"] == 0, active)
+        valid = active & si.is_valid()
+        reg = dr.reinterpret_array(mi.UInt32, si.shape)
+        alpha = dr.gather(mi.Float, opac_t, reg, valid)
+        cut = dr.gather(mi.UInt32, cut_t, reg, valid)
+        alpha = dr.select(cut == CUTOUT_LEAF, alpha * _leaf_alpha(mi, dr, si.uv), alpha)
+        u = r.next_float32()
+        passes = valid & (u >= alpha) & (st["passes"] < MAX_PASS_THROUGH)
+        shade = valid & ~passes
+        first_now = shade & st["first"]
+        later = shade & ~st["first"]
+        st["dist"] = dr.select(passes & st["first"], st["dist"] + si.t, st["dist"])
+
+        # emitters hit by the path
+        em = si.emitter(scene, shade)
+        em_reg = dr.reinterpret_array(mi.UInt32, em)
+        has_em = shade & (em_reg != 0)
+        le = em.eval(si, has_em)
+        ds_hit = mi.DirectionSample3f(scene, si, st["prev_si"])
+        em_pdf = scene.pdf_emitter_direction(st["prev_si"], ds_hit, has_em & ~st["prev_delta"])
+        w_hit = dr.select(st["prev_delta"], 1.0, _mis(st["prev_pdf"], em_pdf))
+        g_hit = dr.gather(mi.Int32, grp_t, em_reg, has_em)
+        st["emission"] = dr.select(first_now & has_em, st["emission"] + le, st["emission"])
+        c_d, c_s = st["beta_d"] * le * w_hit, st["beta_s"] * le * w_hit
+        st["diffuse"] = dr.select(later & has_em, st["diffuse"] + c_d, st["diffuse"])
+        st["specular"] = dr.select(later & has_em, st["specular"] + c_s, st["specular"])
+        add_group(st, g_hit, dr.select(first_now, le, c_d + c_s), has_em)
+
+        # first-stop attributes
+        bsdf = si.bsdf(st["ray"])
+        st["hit"] = st["hit"] | first_now
+        st["obj"] = dr.select(first_now, dr.gather(mi.UInt32, obj_t, reg, first_now), st["obj"])
+        st["z"] = dr.select(first_now, dr.dot(si.p - cam_o, cam_f), st["z"])
+        st["distance"] = dr.select(first_now, st["dist"] + si.t, st["distance"])
+        st["albedo"] = dr.select(first_now, bsdf.eval_diffuse_reflectance(si, first_now), st["albedo"])
+        st["normal"] = dr.select(first_now, si.sh_frame.n, st["normal"])
+        st["position"] = dr.select(first_now, si.p, st["position"])
+
+        # next-event estimation (light sampling), split by lobe at the first stop
+        nee = shade & mi.has_flag(bsdf.flags(), mi.BSDFFlags.Smooth)
+        ds, em_w = scene.sample_emitter_direction(si, mi.Point2f(r.next_float32(), r.next_float32()), True, nee)
+        wo = si.to_local(ds.d)
+        f_all, pdf_b = bsdf.eval_pdf(ctx, si, wo, nee)
+        w_nee = dr.select(ds.delta, 1.0, _mis(ds.pdf, pdf_b))
+        f_d = bsdf.eval(ctx_d, si, wo, nee & st["first"])
+        f_s = bsdf.eval(ctx_s, si, wo, nee & st["first"])
+        n_d = dr.select(st["first"], f_d, st["beta_d"] * f_all) * em_w * w_nee
+        n_s = dr.select(st["first"], f_s, st["beta_s"] * f_all) * em_w * w_nee
+        st["diffuse"] = dr.select(nee, st["diffuse"] + n_d, st["diffuse"])
+        st["specular"] = dr.select(nee, st["specular"] + n_s, st["specular"])
+        em_reg_nee = dr.reinterpret_array(mi.UInt32, ds.emitter)
+        add_group(st, dr.gather(mi.Int32, grp_t, em_reg_nee, nee), n_d + n_s, nee & (em_reg_nee != 0))
+
+        # continue by sampling the BSDF (the continuation split the same way at the first stop)
+        bs, w = bsdf.sample(ctx, si, r.next_float32(), mi.Point2f(r.next_float32(), r.next_float32()), shade)
+        delta = mi.has_flag(bs.sampled_type, mi.BSDFFlags.Delta)
+        ok = shade & (bs.pdf > 0)
+        bd = dr.select(delta, black, bsdf.eval(ctx_d, si, bs.wo, first_now & ~delta) / bs.pdf)
+        bsp = dr.select(delta, w, bsdf.eval(ctx_s, si, bs.wo, first_now & ~delta) / bs.pdf)
+        st["beta_d"] = dr.select(first_now, bd, dr.select(later, st["beta_d"] * w, st["beta_d"]))
+        st["beta_s"] = dr.select(first_now, bsp, dr.select(later, st["beta_s"] * w, st["beta_s"]))
+        new_ray = si.spawn_ray(si.to_world(bs.wo))
+        pass_ray = si.spawn_ray(st["ray"].d)
+        st["ray"] = dr.select(shade, new_ray, dr.select(passes, pass_ray, st["ray"]))
+        st["prev_si"] = dr.select(shade, si, st["prev_si"])
+        st["prev_pdf"] = dr.select(shade, bs.pdf, st["prev_pdf"])
+        st["prev_delta"] = dr.select(shade, delta, st["prev_delta"])
+        st["passes"] = dr.select(passes, st["passes"] + 1, st["passes"])
+        st["depth"] = dr.select(shade, st["depth"] + 1, st["depth"])
+        st["first"] = st["first"] & ~shade
+        alive = dr.max(st["beta_d"] + st["beta_s"]) > 0
+        st["active"] = (passes | (ok & alive)) & (st["depth"] < max_depth)
+        return st
+
+    (st,) = dr.while_loop((state,), lambda st: st["active"], lambda st: (body(st),))
+    keep = ("diffuse", "specular", "emission", "group0", "group1", "group2", "hit", "obj", "z", "distance",
+            "albedo", "normal", "position")
+    return {k: st[k] for k in keep}
