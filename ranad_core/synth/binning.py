@@ -136,7 +136,7 @@ def accumulate(s: dict, sample_bin: np.ndarray, nbins: int, acc: dict | None = N
     acc["z"] += np.bincount(b, weights=s["z"][ok], minlength=nbins)
     names = [n for n in SUMMED + MEANS if n in s] + ["groups"]
     for name in names:
-        val = s[name][ok].reshape(int(ok.sum()), -1)
+        val = s[name][ok].reshape(int(ok.sum()), int(np.prod(s[name].shape[1:])))
         sums = np.stack([np.bincount(b, weights=val[:, c], minlength=nbins) for c in range(val.shape[1])], 1)
         acc[name] = acc.get(name, 0) + sums
     total = sum(s[n] for n in SUMMED).sum(axis=1)

@@ -53,7 +53,7 @@ def is_done(cfg: SynthConfig, index: int) -> bool:
 
 def make_one(cfg: SynthConfig, index: int) -> dict:
     """Renders and writes one scene; returns its manifest."""
-    from .render import render_noisy, render_reference
+    from .render import bin_noisy, noisy_samples, render_reference
 
     t0 = time.perf_counter()
     sseed = scene_seed(cfg.seed, index)
@@ -62,32 +62,33 @@ def make_one(cfg: SynthConfig, index: int) -> dict:
     centre = cfg.frames // 2
     root = scene_dir(cfg, index)
     files, stats = [], {}
+    bins_per_px = {k: [] for k in cfg.kinds}
+    centre_layouts = []  # (kind, spp, layout): the reference is traced once and binned into each
     for kind_name in cfg.kinds:
-        kind = KINDS[kind_name]
         os.makedirs(os.path.join(root, kind_name), exist_ok=True)
-        centre_layouts = []
-        bins_per_px = []
-        for frame in range(cfg.frames):
-            fs = load_frame(spec, frame)
-            for spp in cfg.spp:
-                img, lay, _ = render_noisy(spec, frame, spp, kind, sseed + 7919 * frame + spp, fs)
+    for frame in range(cfg.frames):
+        fs = load_frame(spec, frame)
+        for spp in cfg.spp:
+            samples = noisy_samples(spec, frame, spp, sseed + 7919 * frame + spp, fs)
+            for kind_name in cfg.kinds:
+                img, lay = bin_noisy(spec, samples, spp, KINDS[kind_name])
                 path = os.path.join(root, kind_name, f"noisy_spp{spp}.{frame:04d}.exr")
                 write_deep(path, img)
                 files.append(os.path.relpath(path, root))
                 counts = np.diff(lay.offsets)
-                bins_per_px.append(float(counts[counts > 0].mean()) if (counts > 0).any() else 0.0)
+                bins_per_px[kind_name].append(float(counts[counts > 0].mean()) if (counts > 0).any() else 0.0)
                 if frame == centre:
-                    centre_layouts.append((spp, lay))
-        refs = render_reference(spec, centre, cfg.ref_spp, [lay for _, lay in centre_layouts], sseed + 104729,
-                                load_frame(spec, centre))
-        unbinned = {}
-        for (spp, _), (img, lost) in zip(centre_layouts, refs):
-            path = os.path.join(root, kind_name, f"reference_spp{spp}.{centre:04d}.exr")
-            write_deep(path, img)
-            files.append(os.path.relpath(path, root))
-            unbinned[str(spp)] = lost
-        stats[kind_name] = {"bins_per_covered_pixel": float(np.mean(bins_per_px)),
-                            "reference_unbinned_energy": unbinned}
+                    centre_layouts.append((kind_name, spp, lay))
+    refs = render_reference(spec, centre, cfg.ref_spp, [lay for _, _, lay in centre_layouts], sseed + 104729,
+                            load_frame(spec, centre))
+    for kind_name in cfg.kinds:
+        stats[kind_name] = {"bins_per_covered_pixel": float(np.mean(bins_per_px[kind_name])),
+                            "reference_unbinned_energy": {}}
+    for (kind_name, spp, _), (img, lost) in zip(centre_layouts, refs):
+        path = os.path.join(root, kind_name, f"reference_spp{spp}.{centre:04d}.exr")
+        write_deep(path, img)
+        files.append(os.path.relpath(path, root))
+        stats[kind_name]["reference_unbinned_energy"][str(spp)] = lost
     manifest = {"scene": index, "seed": sseed, "preset": preset, "size": cfg.size, "frames": cfg.frames,
                 "centre_frame": centre, "spp": list(cfg.spp), "ref_spp": cfg.ref_spp,
                 "light_groups": spec.light_groups, "objects": len(spec.objects), "files": files, "stats": stats,

@@ -100,14 +100,25 @@ def deep_image(spec: SceneSpec, lay: BinLayout, vals: dict, with_motion: bool) -
                      display_window=(0, 0, spec.width - 1, spec.height - 1), channel_types=types)
 
 
-def render_noisy(spec: SceneSpec, frame: int, spp: int, kind: str, seed: int, fs=None):
-    """(DeepImage, layout, samples) of one noisy frame."""
-    fs = fs or load_frame(spec, frame)
-    s = trace_all(fs, spp, seed)
+def noisy_samples(spec: SceneSpec, frame: int, spp: int, seed: int, fs=None) -> dict:
+    """One noisy frame's samples with their motion vectors (binned by bin_noisy, once per deep kind)."""
+    s = trace_all(fs or load_frame(spec, frame), spp, seed)
     add_motion(spec, frame, s)
+    return s
+
+
+def bin_noisy(spec: SceneSpec, s: dict, spp: int, kind: str):
+    """(DeepImage, layout) of noisy samples as a deep-Z ("z") or deep-OID ("oid") image."""
     lay, sample_bin = layout_from_samples(s, spec.width, spec.height, kind)
     vals = bin_values(accumulate(s, sample_bin, len(lay.pixel)), lay, spp)
-    return deep_image(spec, lay, vals, True), lay, s
+    return deep_image(spec, lay, vals, True), lay
+
+
+def render_noisy(spec: SceneSpec, frame: int, spp: int, kind: str, seed: int, fs=None):
+    """(DeepImage, layout, samples) of one noisy frame."""
+    s = noisy_samples(spec, frame, spp, seed, fs)
+    img, lay = bin_noisy(spec, s, spp, kind)
+    return img, lay, s
 
 
 def render_reference(spec: SceneSpec, frame: int, ref_spp: int, layouts: list, seed: int, fs=None):

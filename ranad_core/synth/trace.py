@@ -43,6 +43,7 @@ class FrameScene:
     group_of_emitter: np.ndarray  # registry id -> light group (-1: none)
     cam_origin: np.ndarray
     cam_forward: np.ndarray
+    emitters: list                # in object-id order (Mitsuba's own emitter order changes between loads)
 
 
 def load_frame(spec: SceneSpec, frame: int) -> FrameScene:
@@ -58,6 +59,7 @@ def load_frame(spec: SceneSpec, frame: int) -> FrameScene:
     cut = np.zeros(size, np.uint32)
     group_size = 1
     em_groups = {}
+    emitters = []
     for s, reg in zip(shapes, regs):
         o = spec.object(int(s.id()[3:]))
         obj[reg], opac[reg], cut[reg] = o.id, o.opacity, o.cutout
@@ -65,11 +67,13 @@ def load_frame(spec: SceneSpec, frame: int) -> FrameScene:
             em_reg = int(dr.reinterpret_array(mi.UInt32, mi.EmitterPtr(s.emitter()))[0])
             em_groups[em_reg] = o.light_group
             group_size = max(group_size, em_reg + 1)
+            emitters.append((o.id, s.emitter()))
     groups = np.full(group_size, -1, np.int32)
     for reg, g in em_groups.items():
         groups[reg] = g
     cam = look_at(spec.camera.origin[frame], spec.camera.target[frame])
-    return FrameScene(scene, spec, frame, obj, opac, cut, groups, cam[:3, 3].copy(), cam[:3, 2].copy())
+    return FrameScene(scene, spec, frame, obj, opac, cut, groups, cam[:3, 3].copy(), cam[:3, 2].copy(),
+                      [e for _, e in sorted(emitters, key=lambda t: t[0])])
 
 
 def trace(fs: FrameScene, spp: int, seed: int, start: int, count: int, max_depth: int = 4) -> dict:
@@ -89,7 +93,7 @@ def trace(fs: FrameScene, spp: int, seed: int, start: int, count: int, max_depth
     ray, _ = sensor.sample_ray(0.0, 0.5, mi.Point2f(px / W, py / H), mi.Point2f(rng.next_float32(), rng.next_float32()))
     tables = (mi.UInt32(fs.object_of_shape), mi.Float(fs.opacity_of_shape), mi.UInt32(fs.cutout_of_shape),
               mi.Int32(fs.group_of_emitter))
-    out = _loop(mi, dr, fs.mi_scene, ray, rng, tables, mi.Point3f(*map(float, fs.cam_origin)), mi.Vector3f(*map(float, fs.cam_forward)),
+    out = _loop(mi, dr, fs.mi_scene, mi.EmitterPtr(fs.emitters), len(fs.emitters), ray, rng, tables, mi.Point3f(*map(float, fs.cam_origin)), mi.Vector3f(*map(float, fs.cam_forward)),
                 max_depth)
     dr.eval(out)
     res = {"pixel": np.asarray(pix, dtype=np.int64), "sx": np.asarray(sx), "sy": np.asarray(sy)}
@@ -116,7 +120,7 @@ def _mis(a, b):
     return dr.detach(dr.select(a > 0, a2 / (a2 + dr.square(b)), 0.0))
 
 
-def _loop(mi, dr, scene, ray, rng, tables, cam_o, cam_f, max_depth):
+def _loop(mi, dr, scene, emitters, n_emitters, ray, rng, tables, cam_o, cam_f, max_depth):
     obj_t, opac_t, cut_t, grp_t = tables
     n = dr.width(ray.o)
     black = mi.Color3f(0.0)
@@ -181,7 +185,15 @@ def _loop(mi, dr, scene, ray, rng, tables, cam_o, cam_f, max_depth):
 
         # next-event estimation (light sampling), split by lobe at the first stop
         nee = shade & mi.has_flag(bsdf.flags(), mi.BSDFFlags.Smooth)
-        ds, em_w = scene.sample_emitter_direction(si, mi.Point2f(r.next_float32(), r.next_float32()), True, nee)
+        # (the emitter is picked here, uniformly in object-id order, rather than by scene.sample_emitter_direction,
+        # whose emitter order, and so the sample drawn for a given random number, changes between loads)
+        pick = dr.minimum(mi.UInt32(r.next_float32() * n_emitters), n_emitters - 1)
+        emitter = dr.gather(mi.EmitterPtr, emitters, pick, nee)
+        ds, em_w = emitter.sample_direction(si, mi.Point2f(r.next_float32(), r.next_float32()), nee)
+        nee &= ds.pdf > 0
+        visible = ~scene.ray_test(si.spawn_ray_to(ds.p), nee)
+        em_w = dr.select(nee & visible, em_w * n_emitters, 0.0)
+        ds.pdf /= n_emitters
         wo = si.to_local(ds.d)
         f_all, pdf_b = bsdf.eval_pdf(ctx, si, wo, nee)
         w_nee = dr.select(ds.delta, 1.0, _mis(ds.pdf, pdf_b))
