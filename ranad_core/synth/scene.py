@@ -110,10 +110,12 @@ def _bsdf(rng: np.random.Generator, glossy_prob: float) -> dict:
 # ---- the generator -------------------------------------------------------------------------------------
 PRESET_PARAMS = {
     # objects, panes, cards, thin, glossy share, DOF probability, motion scale
-    "easy": dict(objects=(3, 5), panes=(0, 0), cards=(0, 0), thin=(0, 1), glossy=0.2, dof=0.0, motion=0.6),
-    "medium": dict(objects=(4, 7), panes=(1, 2), cards=(1, 3), thin=(1, 2), glossy=0.4, dof=0.3, motion=1.0),
-    "deep-heavy": dict(objects=(5, 8), panes=(2, 4), cards=(4, 8), thin=(2, 4), glossy=0.5, dof=0.6,
-                       motion=1.0),
+    "easy": dict(objects=(3, 5), panes=(0, 0), cards=(0, 0), thin=(0, 1), veils=(0, 0), glossy=0.2, dof=0.0,
+                 motion=0.6),
+    "medium": dict(objects=(4, 7), panes=(1, 2), cards=(1, 3), thin=(1, 2), veils=(0, 1), glossy=0.4, dof=0.3,
+                   motion=1.0),
+    "deep-heavy": dict(objects=(5, 8), panes=(3, 5), cards=(8, 12), thin=(2, 4), veils=(2, 3), glossy=0.5,
+                       dof=0.6, motion=1.0),
 }
 
 
@@ -170,6 +172,12 @@ def make_scene(seed: int, preset: str = "medium", size: int = 128, frames: int =
         pos = [rng.uniform(-1.8, 1.8), rng.uniform(0.5, 1.3), rng.uniform(-0.5, 3.0)]
         base = translate(pos) @ rotate([0, 1, 0], rng.uniform(-50, 50)) @ scale([rng.uniform(0.5, 1.1), rng.uniform(0.4, 0.9), 1])
         add("rectangle", {"type": "twosided", "bsdf": _bsdf(rng, 0.3)}, base, opacity=float(rng.uniform(0.2, 0.6)))
+    for k in range(int(rng.integers(*p["veils"], endpoint=True))):  # large faint panes across the view: layers
+        depth = 0.35 + 0.2 * k + rng.uniform(-0.05, 0.05)
+        pos = cam_o + (cam_t - cam_o) * depth
+        base = look_at(pos, cam_o) @ scale([rng.uniform(1.0, 1.8), rng.uniform(0.8, 1.4), 1])
+        add("rectangle", {"type": "twosided", "bsdf": _bsdf(rng, 0.2)}, base, opacity=float(rng.uniform(0.12, 0.35)),
+            spin=float(rng.uniform(-6, 6) * m))
     for _ in range(int(rng.integers(*p["cards"], endpoint=True))):  # alpha-cut foliage cards, often overlapping
         pos = [rng.uniform(-2.0, 2.0), rng.uniform(0.3, 1.6), rng.uniform(-1.0, 3.5)]
         base = translate(pos) @ rotate(rng.normal(size=3), rng.uniform(0, 60)) @ scale(rng.uniform(0.2, 0.45))
