@@ -130,3 +130,30 @@ def test_same_seed_same_files(small_dataset, tmp_path):
 
 def test_resume_skips_complete_scenes(small_dataset):
     assert dataset.run(small_dataset) == []
+
+
+def test_cli_synth_writes_a_resumable_dataset(tmp_path):
+    from click.testing import CliRunner
+
+    from ranad_cli.main import cli
+
+    out = tmp_path / "ds"
+    args = ["synth", "-o", str(out), "--scenes", "1", "--size", "16", "--frames", "2", "--spp", "2",
+            "--ref-spp", "8", "--preset", "easy", "--kind", "deepoid"]
+    r = CliRunner().invoke(cli, args)
+    assert r.exit_code == 0, r.output
+    assert (out / "scene_0000" / "manifest.json").is_file()
+    assert (out / "scene_0000" / "deepoid" / "noisy_spp2.0001.exr").is_file()
+    assert not (out / "scene_0000" / "deepz").exists()
+    again = CliRunner().invoke(cli, args)
+    assert again.exit_code == 0 and "1 already complete" in again.output
+
+
+def test_cli_synth_rejects_bad_sample_counts(tmp_path):
+    from click.testing import CliRunner
+
+    from ranad_cli.main import cli
+
+    r = CliRunner().invoke(cli, ["synth", "-o", str(tmp_path / "x"), "--spp", "4,x"])
+    assert r.exit_code == 2 and "comma-separated integers" in r.output
+    assert not (tmp_path / "x").exists()
