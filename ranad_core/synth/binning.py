@@ -126,20 +126,51 @@ def assign_to_layout(s: dict, lay: BinLayout) -> np.ndarray:
     return out
 
 
+def _sample_matrix(s: dict):
+    """[n, 2 + channels] float32 tensor of (1, z, every summed and mean channel), built once per sample set."""
+    import torch
+
+    if "_matrix" not in s:
+        names = [n for n in SUMMED + MEANS if n in s] + ["groups"]
+        widths = [int(np.prod(s[n].shape[1:])) for n in names]
+        n = len(s["hit"])
+        mat = np.empty((n, 2 + sum(widths)), np.float32)
+        mat[:, 0] = 1.0
+        mat[:, 1] = s["z"]
+        c = 2
+        for k, w in zip(names, widths):
+            mat[:, c:c + w] = s[k].reshape(n, w)
+            c += w
+        s["_matrix"] = (torch.from_numpy(mat), names, widths)
+        s["_total"] = sum(s[k] for k in SUMMED).sum(axis=1).astype(np.float64)
+    return s["_matrix"]
+
+
 def accumulate(s: dict, sample_bin: np.ndarray, nbins: int, acc: dict | None = None) -> dict:
-    """Adds per-bin sums (count, summed channels, sums of mean channels, depth sum) of samples into acc."""
+    """Adds per-bin sums (count, summed channels, sums of mean channels, depth sum) of samples into acc.
+
+    One index_add over a matrix of every channel, built once per sample set and shared by every layout the
+    samples are binned into (per-channel bincounts took 40% of a scene's time at 1024 spp). Samples without a
+    bin go to a discarded extra row.
+    """
+    import torch
+
+    mat, names, widths = _sample_matrix(s)
     if acc is None:
         acc = {"count": np.zeros(nbins), "z": np.zeros(nbins), "unbinned": 0.0, "total": 0.0}
+        for n, w in zip(names, widths):
+            acc[n] = np.zeros((nbins, w))
     ok = sample_bin >= 0
-    b = sample_bin[ok]
-    acc["count"] += np.bincount(b, minlength=nbins)
-    acc["z"] += np.bincount(b, weights=s["z"][ok], minlength=nbins)
-    names = [n for n in SUMMED + MEANS if n in s] + ["groups"]
-    for name in names:
-        val = s[name][ok].reshape(int(ok.sum()), int(np.prod(s[name].shape[1:])))
-        sums = np.stack([np.bincount(b, weights=val[:, c], minlength=nbins) for c in range(val.shape[1])], 1)
-        acc[name] = acc.get(name, 0) + sums
-    total = sum(s[n] for n in SUMMED).sum(axis=1)
+    idx = torch.from_numpy(np.where(ok, sample_bin, nbins))
+    sums = torch.zeros(nbins + 1, mat.shape[1], dtype=mat.dtype).index_add_(0, idx, mat)[:nbins]
+    sums = sums.numpy().astype(np.float64)
+    acc["count"] += sums[:, 0]
+    acc["z"] += sums[:, 1]
+    c = 2
+    for n, w in zip(names, widths):
+        acc[n] += sums[:, c:c + w]
+        c += w
+    total = s["_total"]
     acc["unbinned"] += float(total[~ok].sum())
     acc["total"] += float(total.sum())
     return acc

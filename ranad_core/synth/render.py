@@ -17,9 +17,9 @@ import numpy as np
 from ..deep import DeepImage
 from .binning import BinLayout, accumulate, assign_to_layout, bin_values, layout_from_samples
 from .scene import SceneSpec, look_at
-from .trace import load_frame, trace
+from .trace import REFERENCE_FIELDS, load_frame, trace
 
-CHUNK = 1 << 20   # samples traced per call (bounds the memory of one reference frame)
+CHUNK = 1 << 19   # samples traced per call (bounds the memory of one reference frame)
 
 
 def project(spec: SceneSpec, frame: int, points: np.ndarray) -> np.ndarray:
@@ -78,12 +78,13 @@ def deep_image(spec: SceneSpec, lay: BinLayout, vals: dict, with_motion: bool) -
     for g, gname in enumerate(spec.light_groups):
         for i, c in enumerate("RGB"):
             put(f"lg_{gname}.{c}", vals["groups"][:, g * 3 + i])
-    for i, c in enumerate("RGB"):
-        put(f"albedo.{c}", vals["albedo"][:, i])
-    for i, c in enumerate("XYZ"):
-        put(f"N.{c}", vals["normal"][:, i])
-    for i, c in enumerate("XYZ"):
-        put(f"P.{c}", vals["position"][:, i], "float")
+    if "albedo" in vals:  # noisy images carry the auxiliary features; references only what is compared
+        for i, c in enumerate("RGB"):
+            put(f"albedo.{c}", vals["albedo"][:, i])
+        for i, c in enumerate("XYZ"):
+            put(f"N.{c}", vals["normal"][:, i])
+        for i, c in enumerate("XYZ"):
+            put(f"P.{c}", vals["position"][:, i], "float")
     put("coverage", vals["coverage"])
     if with_motion:
         for name in ("motion_prev", "motion_next"):
@@ -127,7 +128,7 @@ def render_reference(spec: SceneSpec, frame: int, ref_spp: int, layouts: list, s
     n = spec.width * spec.height * ref_spp
     accs = [None] * len(layouts)
     for start in range(0, n, CHUNK):
-        s = trace(fs, ref_spp, seed, start, min(CHUNK, n - start))
+        s = trace(fs, ref_spp, seed, start, min(CHUNK, n - start), fields=REFERENCE_FIELDS)
         for i, lay in enumerate(layouts):
             accs[i] = accumulate(s, assign_to_layout(s, lay), len(lay.pixel), accs[i])
     out = []

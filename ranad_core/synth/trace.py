@@ -76,8 +76,15 @@ def load_frame(spec: SceneSpec, frame: int) -> FrameScene:
                       [e for _, e in sorted(emitters, key=lambda t: t[0])])
 
 
-def trace(fs: FrameScene, spp: int, seed: int, start: int, count: int, max_depth: int = 4) -> dict:
-    """Samples start..start+count-1 of the frame (sample i belongs to pixel i // spp), as numpy arrays."""
+REFERENCE_FIELDS = ("diffuse", "specular", "emission", "groups", "hit", "obj", "z")
+
+
+def trace(fs: FrameScene, spp: int, seed: int, start: int, count: int, max_depth: int = 4,
+          fields: tuple | None = None) -> dict:
+    """Samples start..start+count-1 of the frame (sample i belongs to pixel i // spp), as numpy arrays.
+
+    fields: the outputs to return besides pixel/sx/sy (default: all); references need only REFERENCE_FIELDS.
+    """
     mi = mitsuba()
     import drjit as dr
 
@@ -97,10 +104,14 @@ def trace(fs: FrameScene, spp: int, seed: int, start: int, count: int, max_depth
                 max_depth)
     dr.eval(out)
     res = {"pixel": np.asarray(pix, dtype=np.int64), "sx": np.asarray(sx), "sy": np.asarray(sy)}
+    want = set(fields or out)
+    if "groups" in want:
+        want |= {f"group{g}" for g in range(len(spec.light_groups))}
     for name, val in out.items():
-        a = np.asarray(val)
-        res[name] = a.T.copy() if a.ndim == 2 and a.shape[0] == 3 else a
-    res["groups"] = np.stack([res.pop(f"group{g}") for g in range(MAX_GROUPS)], axis=1)[:, : len(spec.light_groups)]
+        if name in want:
+            a = np.asarray(val)
+            res[name] = a.T.copy() if a.ndim == 2 and a.shape[0] == 3 else a
+    res["groups"] = np.stack([res.pop(f"group{g}") for g in range(len(spec.light_groups))], axis=1)
     res["hit"] = res["hit"].astype(bool)
     return res
 
