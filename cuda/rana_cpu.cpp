@@ -107,7 +107,7 @@ QueryOrder order_queries(const torch::Tensor& qpix_t, int64_t Hk, int64_t Wk) {
 // The op's geometry and its mask-and-bias table (kept alive alongside the Op that points into it).
 template <typename T>
 struct OpWithTable {
-  std::vector<T> tab;
+  std::vector<T> tab, ptab;
   rana::Op<T> op;
 };
 
@@ -126,6 +126,13 @@ OpWithTable<T> make_op(const Plan& pl, const torch::Tensor& k_offsets, int64_t H
                    t.tab.data());
   t.op = rana::Op<T>{rana::Grid{k_offsets.data_ptr<int64_t>(), Hk, Wk}, rows, t.tab.data(), int(pl.H), int(pl.dk),
                      int(pl.dv), T(scale)};
+  if (std::is_same_v<T, float> && !pl.scalar && pl.HB == 4 && rows.R <= 3) {  // permute tables (rana_math.h)
+    t.ptab.resize(pl.H / 4 * rows.n * 32);
+    rana::fill_permute_table(rows, bias.has_value() ? b.data_ptr<T>() : static_cast<const T*>(nullptr), int(pl.H),
+                             t.ptab.data());
+    t.op.ptab = t.ptab.data();
+    t.op.has_bias = bias.has_value();
+  }
   return t;
 }
 

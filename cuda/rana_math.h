@@ -245,7 +245,10 @@ struct Block {
 template <int L>
 struct LaneTable {
   int32_t base[L];
-  int32_t used[L];  // -1 (all bits) for lanes in use, 0 for padding
+  int32_t used[L];      // -1 (all bits) for lanes in use, 0 for padding
+  int32_t rel_term[L];  // R - sign * rel (dx + R = rel_term + x); far out of range for padding lanes
+  int32_t hoff[L];      // 8 * (head - h0): the lane's slot in a permute table (see lane_bias)
+  int32_t group;        // h0 / 4
 };
 
 template <int L, int HB>
@@ -257,8 +260,26 @@ RANA_HD LaneTable<L> lane_table(const Block<L / HB>& b, const DiscRows& rows, in
     const bool used = e < b.n;
     lt.used[l] = used ? -1 : 0;
     lt.base[l] = used ? (h * rows.n) * tw + o - sign * b.rel[e] : int32_t(int64_t(H) * rows.n * tw + o);
+    lt.rel_term[l] = used ? rows.R - sign * b.rel[e] : -(1 << 20);
+    lt.hoff[l] = 8 * (l % HB);
   }
+  lt.group = h0 / 4;
   return lt;
+}
+
+// Permute tables for blocks of 4 heads with R <= 3 (side <= 8): [H / 4][rows.n][32], entry 8 * hl + dx + R of
+// (group g, row r) = bias[4 g + hl, dy_r + R, dx + R] (0 without bias or beyond the side). One vpermt2ps then gives
+// a key pixel's bias for all 16 lanes, and two compares give its mask, instead of a 16-lane gather per pixel.
+template <typename T>
+RANA_HD void fill_permute_table(const DiscRows& rows, const T* bias, int H, T* ptab) {
+  const int side = 2 * rows.R + 1;
+  for (int g = 0; g < H / 4; ++g)
+    for (int r = 0; r < rows.n; ++r)
+      for (int e = 0; e < 32; ++e) {
+        const int h = 4 * g + e / 8, m = e % 8;
+        ptab[(g * rows.n + r) * 32 + e] =
+            bias && m < side ? bias[(h * side + rows.dy[r] + rows.R) * side + m] : T(0);
+      }
 }
 
 // The L lanes' table entries for disc row r (row_offset = r * tw) at x: the bias and mask of one key pixel.
@@ -365,7 +386,37 @@ struct Op {
   const T* tab;  // fill_table
   int H, dk, dv;
   T scale;
+  const T* ptab = nullptr;  // fill_permute_table, for blocks of 4 heads (optional)
+  bool has_bias = false;
 };
+
+// The bias and mask of one key pixel for every lane: disc row r, x as for lane_bias. With a permute table (float,
+// 16 lanes, AVX-512) a permute and two compares; otherwise the gather of lane_bias.
+template <typename V>
+RANA_HD V key_pixel_bias(const Op<typename Lanes<V>::T>& op, const LaneTable<Lanes<V>::L>& lt, int r, int32_t x) {
+#if defined(__AVX512F__) && !defined(__CUDACC__)
+  if constexpr (Lanes<V>::L == 16 && sizeof(typename Lanes<V>::T) == 4) {
+    if (op.ptab) {
+      const __m512i t = _mm512_add_epi32(_mm512_loadu_si512(lt.rel_term), _mm512_set1_epi32(x));
+      const __mmask16 ok = _mm512_cmpge_epi32_mask(t, _mm512_set1_epi32(op.rows.dx0[r] + op.rows.R)) &
+                           _mm512_cmple_epi32_mask(t, _mm512_set1_epi32(op.rows.dx1[r] + op.rows.R));
+      const __m512 ninf = _mm512_set1_ps(-INFINITY);
+      __m512 v;
+      if (op.has_bias) {
+        const float* row = op.ptab + (lt.group * op.rows.n + r) * 32;
+        const __m512i idx = _mm512_add_epi32(
+            _mm512_loadu_si512(lt.hoff), _mm512_min_epi32(_mm512_max_epi32(t, _mm512_setzero_si512()),
+                                                           _mm512_set1_epi32(7)));
+        v = _mm512_mask_blend_ps(ok, ninf, _mm512_permutex2var_ps(_mm512_loadu_ps(row), idx, _mm512_loadu_ps(row + 16)));
+      } else {
+        v = _mm512_mask_blend_ps(ok, ninf, _mm512_setzero_ps());
+      }
+      return reinterpret_cast<const V&>(v);
+    }
+  }
+#endif
+  return lane_bias<V>(op.tab, lt, r * table_width(op.rows.R), x);
+}
 
 // The HB scalars at p repeated over the L lanes (lane l gets p[l % HB]): one head-chunk of an operand stored
 // [N, d, H], i.e. channel c of HB consecutive heads of one entry.
@@ -465,7 +516,7 @@ RANA_HD void forward_block(const Op<typename Lanes<V>::T>& op, const Block<Lanes
                            const typename Lanes<V>::T* __restrict__ kt, const typename Lanes<V>::T* __restrict__ vt,
                            typename Lanes<V>::T* out, typename Lanes<V>::T* lse) {
   using T = typename Lanes<V>::T;
-  const int H = op.H, tw = table_width(op.rows.R);
+  const int H = op.H;
   V qr[DK], acc_mem[DV];
   load_lanes<V, HB, DK>(q, b, h0, H, op.scale, qr);
   RANA_UNROLL
@@ -474,11 +525,22 @@ RANA_HD void forward_block(const Op<typename Lanes<V>::T>& op, const Block<Lanes
   V m = splat<V>(neg_inf<T>()), l = splat<V>(0);
   V s[NB];
   int64_t key[NB];
-  int nb = 0;
-  auto flush = [&](V mx) RANA_NOINLINE {
+  // nb (entries in the buffer) is passed by value: captured by reference it lived in memory, and the store and
+  // reload on every key became the loop's critical path
+  auto flush = [&](int nb) RANA_NOINLINE {
     V acc[DV];
     RANA_UNROLL
     for (int c = 0; c < DV; ++c) acc[c] = acc_mem[c];
+    V mx0 = splat<V>(neg_inf<T>()), mx1 = mx0, mx2 = mx0, mx3 = mx0;  // four chains
+    int i = 0;
+    for (; i + 4 <= nb; i += 4) {
+      mx0 = vmax(mx0, s[i]);
+      mx1 = vmax(mx1, s[i + 1]);
+      mx2 = vmax(mx2, s[i + 2]);
+      mx3 = vmax(mx3, s[i + 3]);
+    }
+    for (; i < nb; ++i) mx0 = vmax(mx0, s[i]);
+    const V mx = vmax(vmax(mx0, mx1), vmax(mx2, mx3));
     const V mn = vmax(m, mx);
     const V base = mn == neg_inf<T>() ? splat<V>(0) : mn;  // lanes with nothing yet: exp(-inf - 0) = 0
     const V corr = fast_exp(m - base);
@@ -497,27 +559,24 @@ RANA_HD void forward_block(const Op<typename Lanes<V>::T>& op, const Block<Lanes
     for (int c = 0; c < DV; ++c) acc_mem[c] = acc[c];
     keep_in_memory(acc_mem);
     m = mn;
-    nb = 0;
   };
   int r;
   int32_t x;
   int64_t first, last;
-  V mx = splat<V>(neg_inf<T>());  // maximum of the buffered logits
+  int nb = 0;
   while (walk.next(r, x, first, last)) {
-    const V bv = lane_bias<V>(op.tab, lt, r * tw, x);
+    const V bv = key_pixel_bias<V>(op, lt, r, x);
     for (int64_t j = first; j < last; ++j) {
       if (nb == NB) {
-        flush(mx);
-        mx = splat<V>(neg_inf<T>());
+        flush(nb);
+        nb = 0;
       }
       RANA_PREFETCH(vt + j * DV * H);
-      const V sj = dot_rows<V, HB, DK>(qr, kt + j * DK * H + h0, H, bv);
-      mx = vmax(mx, sj);
-      s[nb] = sj;
+      s[nb] = dot_rows<V, HB, DK>(qr, kt + j * DK * H + h0, H, bv);
       key[nb++] = j;
     }
   }
-  flush(mx);
+  flush(nb);
   const V empty = l == T(0) ? splat<V>(1) : splat<V>(0);
   const V inv = T(1) / (l + empty);
   RANA_UNROLL
@@ -538,7 +597,7 @@ RANA_HD void backward_dq_block(const Op<typename Lanes<V>::T>& op, const Block<L
                                const typename Lanes<V>::T* delta, const typename Lanes<V>::T* __restrict__ kt,
                                const typename Lanes<V>::T* __restrict__ vt, typename Lanes<V>::T* dq) {
   using T = typename Lanes<V>::T;
-  const int H = op.H, tw = table_width(op.rows.R);
+  const int H = op.H;
   V qr[DK], acc_mem[DK];
   load_lanes<V, HB, DK>(q, b, h0, H, op.scale, qr);
   RANA_UNROLL
@@ -548,8 +607,7 @@ RANA_HD void backward_dq_block(const Op<typename Lanes<V>::T>& op, const Block<L
   const V D = load_lane_scalars<V, HB>(delta, b, h0, H, T(0));
   V s[NB];
   int64_t key[NB];
-  int nb = 0;
-  auto flush = [&]() RANA_NOINLINE {
+  auto flush = [&](int nb) RANA_NOINLINE {  // nb by value (see forward_block)
     {
       V dr[DV];
       load_lanes<V, HB, DV>(dout, b, h0, H, T(1), dr);
@@ -565,21 +623,24 @@ RANA_HD void backward_dq_block(const Op<typename Lanes<V>::T>& op, const Block<L
     RANA_UNROLL
     for (int c = 0; c < DK; ++c) acc_mem[c] = acc[c];
     keep_in_memory(acc_mem);
-    nb = 0;
   };
   int r;
   int32_t x;
   int64_t first, last;
+  int nb = 0;
   while (walk.next(r, x, first, last)) {
-    const V bv = lane_bias<V>(op.tab, lt, r * tw, x);
+    const V bv = key_pixel_bias<V>(op, lt, r, x);
     for (int64_t j = first; j < last; ++j) {
-      if (nb == NB) flush();
+      if (nb == NB) {
+        flush(nb);
+        nb = 0;
+      }
       RANA_PREFETCH(vt + j * DV * H);
       s[nb] = dot_rows<V, HB, DK>(qr, kt + j * DK * H + h0, H, bv);
       key[nb++] = j;
     }
   }
-  flush();
+  flush(nb);
   RANA_UNROLL
   for (int c = 0; c < DK; ++c) acc_mem[c] *= op.scale;
   store_lanes<V, HB, DK>(acc_mem, b, h0, H, dq);
@@ -612,8 +673,7 @@ RANA_HD void backward_dkdv_block(const Op<typename Lanes<V>::T>& op, const Block
   V s[NB], p[NB];
   int64_t qid[NB];
   int32_t tag[NB];  // r * tw + centre - x: where ds goes in the per-lane bias tables (plus the lane's rel)
-  int nb = 0;
-  auto flush = [&]() RANA_NOINLINE {
+  auto flush = [&](int nb) RANA_NOINLINE {  // nb by value (see forward_block)
     {
       V vr[DV];
       load_lanes<V, HB, DV>(v, b, h0, H, T(1), vr);
@@ -652,8 +712,8 @@ RANA_HD void backward_dkdv_block(const Op<typename Lanes<V>::T>& op, const Block
         i = e;
       }
     }
-    nb = 0;
   };
+  int nb = 0;
   {
     V kr[DK];
     load_lanes<V, HB, DK>(k, b, h0, H, op.scale, kr);
@@ -661,9 +721,12 @@ RANA_HD void backward_dkdv_block(const Op<typename Lanes<V>::T>& op, const Block
     int32_t x;
     int64_t first, last;
     while (walk.next(r, x, first, last)) {
-      const V bv = lane_bias<V>(op.tab, lt, r * tw, -x);
+      const V bv = key_pixel_bias<V>(op, lt, r, -x);
       for (int64_t i = first; i < last; ++i) {
-        if (nb == NB) flush();
+        if (nb == NB) {
+          flush(nb);
+          nb = 0;
+        }
         RANA_PREFETCH(dost + i * DV * H);
         s[nb] = dot_rows<V, HB, DK>(kr, qst + i * DK * H + h0, H, bv);
         qid[nb] = i;
@@ -671,7 +734,7 @@ RANA_HD void backward_dkdv_block(const Op<typename Lanes<V>::T>& op, const Block
       }
     }
   }
-  flush();
+  flush(nb);
   RANA_UNROLL
   for (int c = 0; c < DK; ++c) acc_k[c] *= op.scale;
   store_lanes<V, HB, DK>(acc_k, b, h0, H, dk);

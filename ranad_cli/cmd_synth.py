@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import os
+
 import click
 from tqdm import tqdm
 
@@ -31,7 +33,8 @@ def _int_list(text: str) -> tuple:
               help="Scene presets, used in turn (default: all three).")
 @click.option("--kind", "kinds", multiple=True, type=click.Choice(["deepz", "deepoid"]),
               help="Deep kinds to write (default: both).")
-@click.option("--workers", default=1, show_default=True, type=click.IntRange(1), help="Scenes rendered in parallel.")
+@click.option("--workers", default=min(2, os.cpu_count() or 1), show_default=True, type=click.IntRange(1),
+              help="Scenes rendered in parallel (processes; the cores are shared out between them).")
 def synth_cmd(out, scenes, size, frames, spp, ref_spp, seed, presets, kinds, workers):
     """Render SCENES procedural animated scenes: every frame at each noisy spp, and the centre frame's
     reference binned into each noisy image's bins, as deep-Z and deep-OID EXRs with a manifest per scene.

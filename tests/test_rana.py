@@ -112,6 +112,24 @@ def test_head_sizes_padded_to_compiled_sizes(d, dv):
         torch.testing.assert_close(x, y, atol=1e-5 * max(1.0, float(y.abs().max())), rtol=1e-5)
 
 
+@pytest.mark.parametrize("heads,radius", [(1, 2.0), (3, 2.0), (8, 2.0), (8, 4.5), (4, 4.5)])
+def test_head_counts_and_wide_discs(heads, radius):
+    """1 head (16 queries per block), padded heads (3 -> 4), two groups of 4 heads, and discs wider than the
+    permute tables (R > 3: the gather path) all agree with the oracle, forward and backward."""
+    qp, ko, ks = {n: (a, b, c) for n, a, b, c in layouts()}["self"]
+    q, k, v = qkv(*_counts("self"), heads, 16, 8, torch.float32)
+    side = disc(radius).side
+    bias = torch.randn(heads, side, side)
+    res = []
+    for backend in ("cpu", "reference"):
+        ts = [t.clone().requires_grad_(True) for t in (q, k, v, bias)]
+        out = rana(*ts[:3], qp, ko, ks, radius, ts[3], backend=backend)
+        res.append((out, *torch.autograd.grad(out, ts, torch.linspace(-1, 1, out.numel()).reshape(out.shape))))
+    for x, y in zip(*res):
+        x, y = x.detach(), y.detach()
+        torch.testing.assert_close(x, y, atol=1e-5 * max(1.0, float(y.abs().max())), rtol=1e-5)
+
+
 def _counts(name):
     """(queries, key bins) of one of the test layouts."""
     qp, ko, _ = {n: (a, b, c) for n, a, b, c in layouts()}[name]

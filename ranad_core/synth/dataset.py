@@ -51,6 +51,18 @@ def is_done(cfg: SynthConfig, index: int) -> bool:
     return os.path.isfile(os.path.join(scene_dir(cfg, index), "manifest.json"))
 
 
+def _worker_init(threads: int) -> None:
+    """Each worker process gets its share of the cores for Dr.Jit (both using all cores oversubscribes them)."""
+    from .mitsuba_env import mitsuba
+
+    mitsuba()
+    import drjit as dr
+    import torch
+
+    dr.set_thread_count(threads)
+    torch.set_num_threads(threads)
+
+
 def make_one(cfg: SynthConfig, index: int) -> dict:
     """Renders and writes one scene; returns its manifest."""
     from .render import bin_noisy, noisy_samples, render_reference
@@ -112,7 +124,9 @@ def run(cfg: SynthConfig, workers: int = 1, progress=None) -> list:
         return done
     import multiprocessing as mp
 
-    with ProcessPoolExecutor(workers, mp_context=mp.get_context("spawn")) as pool:
+    threads = max(1, (os.cpu_count() or 1) // workers)
+    with ProcessPoolExecutor(workers, mp_context=mp.get_context("spawn"), initializer=_worker_init,
+                             initargs=(threads,)) as pool:
         for m in pool.map(make_one, [cfg] * len(todo), todo):
             done.append(m)
             if progress:
