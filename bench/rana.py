@@ -24,12 +24,17 @@ from ranad_core.rana import rana, self_attention_layout  # noqa: E402
 from ranad_core.rana.neighborhood import disc  # noqa: E402
 
 
-def problem(size: int, heads: int, dim: int, seed: int = 0):
+def problem(size: int, heads: int, dim: int, seed: int = 0, layout: str = "natural"):
+    """offsets and q, k, v [N, heads, dim]; layout "channel-major" gives them as transposed views of contiguous
+    [N, dim, heads] tensors, the layout a projection can write so that the kernels need no copy."""
     g = torch.Generator().manual_seed(seed)
     counts = torch.randint(0, 7, (size * size,), generator=g)
     offsets = torch.cat([torch.zeros(1, dtype=torch.int64), torch.cumsum(counts, 0)])
     n = int(offsets[-1])
-    q, k, v = (torch.randn(n, heads, dim, generator=g) for _ in range(3))
+    if layout == "channel-major":
+        q, k, v = (torch.randn(n, dim, heads, generator=g).transpose(1, 2) for _ in range(3))
+    else:
+        q, k, v = (torch.randn(n, heads, dim, generator=g) for _ in range(3))
     return offsets, q, k, v
 
 
@@ -57,12 +62,12 @@ def best_of(fn, repeats: int) -> float:
     return min(times)
 
 
-def run(size, radius, heads, dim, backend, repeats):
-    offsets, q, k, v = problem(size, heads, dim)
+def run(size, radius, heads, dim, backend, repeats, layout="natural"):
+    offsets, q, k, v = problem(size, heads, dim, layout=layout)
     qp, ko, ks = self_attention_layout(offsets, size, size)
     bias = torch.zeros(heads, 2 * int(radius) + 1, 2 * int(radius) + 1)
     fwd = best_of(lambda: rana(q, k, v, qp, ko, ks, radius, bias, backend=backend), repeats)
-    qg, kg, vg, bg = (t.clone().requires_grad_(True) for t in (q, k, v, bias))
+    qg, kg, vg, bg = (t.detach().requires_grad_(True) for t in (q, k, v, bias))
 
     def fwd_bwd():
         out = rana(qg, kg, vg, qp, ko, ks, radius, bg, backend=backend)
@@ -81,15 +86,17 @@ def main() -> None:
     ap.add_argument("--dim", type=int, default=16)
     ap.add_argument("--threads", type=int, default=torch.get_num_threads())
     ap.add_argument("--repeats", type=int, default=3)
+    ap.add_argument("--layout", choices=("natural", "channel-major"), default="natural",
+                    help="memory layout of q, k, v (both are [N, heads, d] tensors; see problem())")
     args = ap.parse_args()
     torch.set_num_threads(args.threads)
     flop = 4 * args.dim * args.heads
     print(f"RaNA bench: radius {args.radius}, {args.heads} heads x {args.dim}, {args.threads} threads, "
-          f"torch {torch.__version__}")
+          f"{args.layout} q/k/v, torch {torch.__version__}")
     rows = []
     for label, size, backend in (("C++ kernels", args.size, "cpu"), ("C++ kernels", args.ref_size, "cpu"),
                                  ("reference", args.ref_size, "reference")):
-        fwd, both, pairs, bins = run(size, args.radius, args.heads, args.dim, backend, args.repeats)
+        fwd, both, pairs, bins = run(size, args.radius, args.heads, args.dim, backend, args.repeats, args.layout)
         rows.append((label, size, fwd, both, pairs))
         if backend == "cpu" and size == args.size:
             peak_cpp = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024

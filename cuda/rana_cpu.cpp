@@ -31,8 +31,31 @@ void check_inputs(const torch::Tensor& q, const torch::Tensor& k, const torch::T
   TORCH_CHECK(k_offsets.numel() == Hk * Wk + 1, "k_offsets must have Hk*Wk+1 entries");
   TORCH_CHECK(q.size(2) <= rana::kMaxDim && v.size(2) <= rana::kMaxDim, "head dimensions above ", rana::kMaxDim,
               " are not supported");
-  for (const auto* t : {&q, &k, &v, &q_pixels, &k_offsets})
+  for (const auto* t : {&q_pixels, &k_offsets})
     TORCH_CHECK(t->is_contiguous() && t->device().is_cpu(), "inputs must be contiguous CPU tensors");
+  for (const auto* t : {&q, &k, &v})
+    TORCH_CHECK(t->device().is_cpu() && (t->is_contiguous() || t->transpose(1, 2).is_contiguous()),
+                "q, k, v must be CPU tensors, contiguous [N, H, d] or channel-major (a transposed [N, d, H])");
+}
+
+// q, k, v may come channel-major (the transposed view of a contiguous [N, d, H] tensor, as a projection can write
+// them): then the kernels stream them without the copy.
+bool is_channel_major(const torch::Tensor& x) { return !x.is_contiguous() && x.transpose(1, 2).is_contiguous(); }
+
+template <typename T>
+rana_cpu::Operand<T> operand(const torch::Tensor& x) {
+  return rana_cpu::Operand<T>{x.data_ptr<T>(), x.stride(0), x.stride(1), x.stride(2)};
+}
+
+template <typename T>
+rana_cpu::Output<T> output(torch::Tensor& x) {
+  return rana_cpu::Output<T>{x.data_ptr<T>(), x.stride(0), x.stride(1), x.stride(2)};
+}
+
+// An [n, H, d] gradient in the layout of its input (autograd would otherwise copy it into that layout).
+torch::Tensor empty_like_layout(const torch::Tensor& like, int64_t n, int64_t H, int64_t d) {
+  if (is_channel_major(like)) return torch::empty({n, d, H}, like.options()).transpose(1, 2);
+  return torch::empty({n, H, d}, like.options());
 }
 
 int threads() { return at::get_num_threads(); }
@@ -58,7 +81,8 @@ Plan plan_for(int64_t H, int64_t dk, int64_t dv, bool is_double, bool scalar_lan
   return Plan{false, 4, (H + 3) / 4 * 4, pdk, pdv};
 }
 
-// [N, h, c] -> [N, H, d], zero heads and channels appended (fill for the padding of a [N, h] tensor's heads)
+// [N, h, c] -> [N, H, d], zero heads and channels appended; keeps a channel-major view as it is when no padding
+// is needed
 torch::Tensor pad_to(const torch::Tensor& x, int64_t H, int64_t d) {
   if (x.size(1) == H && x.size(2) == d) return x;
   return torch::constant_pad_nd(x, {0, d - x.size(2), 0, H - x.size(1)}, 0).contiguous();
@@ -69,13 +93,16 @@ torch::Tensor pad_heads(const torch::Tensor& x, int64_t H, double fill) {
   return torch::constant_pad_nd(x, {0, H - x.size(1)}, fill).contiguous();
 }
 
-// [N, H, d] -> [N, d, H]: channel c of all heads of an entry side by side (one load serves a block's heads).
-// One parallel pass over entries (torch's strided copy of the transposed view took ~40 ms per 200 MB operand).
+// [N, H, d] -> [N, d, H] storage: channel c of all heads of an entry side by side (one load serves a block's
+// heads). Free for a channel-major view; otherwise one parallel pass over entries (torch's strided copy of the
+// transposed view took ~40 ms per 200 MB operand).
 torch::Tensor channel_major(const torch::Tensor& x) {
+  if (is_channel_major(x)) return x.transpose(1, 2);
+  const auto xc = x.contiguous();
   const int64_t n = x.size(0), H = x.size(1), d = x.size(2);
   auto out = torch::empty({n, d, H}, x.options());
   AT_DISPATCH_FLOATING_TYPES(x.scalar_type(), "channel_major", [&] {
-    const scalar_t* src = x.data_ptr<scalar_t>();
+    const scalar_t* src = xc.data_ptr<scalar_t>();
     scalar_t* dst = out.data_ptr<scalar_t>();
     at::parallel_for(0, n, 4096, [&](int64_t b, int64_t e) {
       for (int64_t j = b; j < e; ++j)
@@ -176,7 +203,7 @@ std::vector<torch::Tensor> rana_forward(torch::Tensor q, torch::Tensor k, torch:
     using T = scalar_t;
     const auto t = make_op<T>(pl, k_offsets, Hk, Wk, rows_dy, rows_dx0, rows_dx1, R, bias, scale);
     with_kernel<T>(pl, [&]<typename V, int HB>() {
-      rana_cpu::forward<T, V, HB>(t.op, qp.data_ptr<T>(), kt.data_ptr<T>(), vt.data_ptr<T>(), qo.index(),
+      rana_cpu::forward<T, V, HB>(t.op, operand<T>(qp), kt.data_ptr<T>(), vt.data_ptr<T>(), qo.index(),
                                   out.data_ptr<T>(), lse.data_ptr<T>(), threads());
     });
   });
@@ -200,7 +227,9 @@ std::vector<torch::Tensor> rana_backward(torch::Tensor dout, torch::Tensor q, to
   const auto lse_pos = pad_heads(torch::where(torch::isinf(lse), torch::full_like(lse, INFINITY), lse), pl.H,
                                  INFINITY);
   const auto delta_p = pad_heads(delta, pl.H, 0.0);
-  auto dq = torch::empty_like(qp), dk_t = torch::empty_like(kp), dv_t = torch::empty_like(vp);
+  auto dq = empty_like_layout(qp, qp.size(0), pl.H, pl.dk);
+  auto dk_t = empty_like_layout(kp, kp.size(0), pl.H, pl.dk);
+  auto dv_t = empty_like_layout(vp, vp.size(0), pl.H, pl.dv);
   const int64_t side = 2 * R + 1;
   auto dbias = need_dbias ? torch::empty({pl.H, side, side}, q.options()) : torch::Tensor();
   AT_DISPATCH_FLOATING_TYPES(q.scalar_type(), "rana_backward", [&] {
@@ -209,19 +238,19 @@ std::vector<torch::Tensor> rana_backward(torch::Tensor dout, torch::Tensor q, to
     with_kernel<T>(pl, [&]<typename V, int HB>() {
       {  // pass 1: dQ per query block
         const auto kt = channel_major(kp), vt = channel_major(vp);
-        rana_cpu::backward_dq<T, V, HB>(t.op, qp.data_ptr<T>(), dop.data_ptr<T>(), lse_pos.data_ptr<T>(),
+        rana_cpu::backward_dq<T, V, HB>(t.op, operand<T>(qp), operand<T>(dop), lse_pos.data_ptr<T>(),
                                         delta_p.data_ptr<T>(), kt.data_ptr<T>(), vt.data_ptr<T>(), qo.index(),
-                                        dq.data_ptr<T>(), threads());
+                                        output<T>(dq), threads());
       }
       // pass 2: dK, dV per key block; the queries' operands in pixel order
-      auto sorted = [&](const torch::Tensor& x) -> torch::Tensor {
-        return qo.identity ? x : x.index_select(0, qo.order).contiguous();
+      auto sorted = [&](const torch::Tensor& x) -> torch::Tensor {  // keeps a channel-major view's layout
+        return qo.identity ? x : x.index_select(0, qo.order);
       };
       const torch::Tensor qst = channel_major(sorted(qp)), dost = channel_major(sorted(dop)),
-                          lse_s = sorted(lse_pos), delta_s = sorted(delta_p);
+                          lse_s = sorted(lse_pos).contiguous(), delta_s = sorted(delta_p).contiguous();
       rana_cpu::backward_dkdv<T, V, HB>(t.op, qst.data_ptr<T>(), dost.data_ptr<T>(), lse_s.data_ptr<T>(),
-                                        delta_s.data_ptr<T>(), kp.data_ptr<T>(), vp.data_ptr<T>(), qo.ptr.data(),
-                                        dk_t.data_ptr<T>(), dv_t.data_ptr<T>(),
+                                        delta_s.data_ptr<T>(), operand<T>(kp), operand<T>(vp), qo.ptr.data(),
+                                        output<T>(dk_t), output<T>(dv_t),
                                         need_dbias ? dbias.data_ptr<T>() : nullptr, threads());
     });
   });

@@ -135,10 +135,13 @@ void dispatch_dims(int dk, int dv, F&& f) {
   }
 }
 
-// Forward over every query block: q [Nq, H, dk]; kt [Nk, dk, H], vt [Nk, dv, H]; out [Nq, H, dv], lse [Nq, H].
+using rana::Operand;
+using rana::Output;
+
+// Forward over every query block: q [Nq, H, dk] (any Operand layout); kt [Nk, dk, H], vt [Nk, dv, H]; out [Nq, H, dv], lse [Nq, H].
 template <typename T, typename V, int HB>
-void forward(const rana::Op<T>& op, const T* q, const T* kt, const T* vt, const QueryIndex& qi, T* out, T* lse,
-             int threads) {
+void forward(const rana::Op<T>& op, const Operand<T>& q, const T* kt, const T* vt, const QueryIndex& qi, T* out,
+             T* lse, int threads) {
   constexpr int L = rana::Lanes<V>::L, Q = L / HB;
   const auto blocks = make_blocks(qi.ptr, op.g.Hk, op.g.Wk, Q, threads);
   dispatch_dims<V>(op.dk, op.dv, [&]<int DK, int DV>() {
@@ -158,10 +161,11 @@ void forward(const rana::Op<T>& op, const T* q, const T* kt, const T* vt, const 
   });
 }
 
-// dQ over every query block: q, dout [Nq, H, d]; lse (+inf for empty discs), delta [Nq, H]; kt, vt as forward.
+// dQ over every query block: q, dout [Nq, H, d] (Operands); lse (+inf for empty discs), delta [Nq, H]; kt, vt
+// as forward.
 template <typename T, typename V, int HB>
-void backward_dq(const rana::Op<T>& op, const T* q, const T* dout, const T* lse, const T* delta, const T* kt,
-                 const T* vt, const QueryIndex& qi, T* dq, int threads) {
+void backward_dq(const rana::Op<T>& op, const Operand<T>& q, const Operand<T>& dout, const T* lse, const T* delta,
+                 const T* kt, const T* vt, const QueryIndex& qi, const Output<T>& dq, int threads) {
   constexpr int L = rana::Lanes<V>::L, Q = L / HB;
   const auto blocks = make_blocks(qi.ptr, op.g.Hk, op.g.Wk, Q, threads);
   dispatch_dims<V>(op.dk, op.dv, [&]<int DK, int DV>() {
@@ -184,10 +188,11 @@ void backward_dq(const rana::Op<T>& op, const T* q, const T* dout, const T* lse,
 
 // dK, dV (and the bias gradient [H, 2R+1, 2R+1] when dbias is not null) over every key block: queries sorted by
 // pixel (q_ptr: their CSR over the grid) with qst [Nq, dk, H], dost [Nq, dv, H], lse_s, delta_s [Nq, H]; keys in
-// their own order, k, v [Nk, H, d]; writes dk, dv [Nk, H, d].
+// their own order, k, v [Nk, H, d] (Operands); writes dk, dv [Nk, H, d] (Outputs).
 template <typename T, typename V, int HB>
-void backward_dkdv(const rana::Op<T>& op, const T* qst, const T* dost, const T* lse_s, const T* delta_s, const T* k,
-                   const T* v, const int64_t* q_ptr, T* dk, T* dv, T* dbias, int threads) {
+void backward_dkdv(const rana::Op<T>& op, const T* qst, const T* dost, const T* lse_s, const T* delta_s,
+                   const Operand<T>& k, const Operand<T>& v, const int64_t* q_ptr, const Output<T>& dk,
+                   const Output<T>& dv, T* dbias, int threads) {
   constexpr int L = rana::Lanes<V>::L, Q = L / HB;
   const int H = op.H, n_rows = op.rows.n, R = op.rows.R, side = 2 * R + 1;
   const int tw = rana::table_width(R), o = rana::table_centre(R), groups = H / HB;
@@ -231,12 +236,14 @@ void backward_dkdv(const rana::Op<T>& op, const T* qst, const T* dost, const T* 
 
 // The kernels each translation unit instantiates (declared here so that the bindings do not instantiate them).
 #define RANA_CPU_KERNELS(EXTERN, T, V, HB)                                                                         \
-  EXTERN template void forward<T, V, HB>(const rana::Op<T>&, const T*, const T*, const T*, const QueryIndex&, T*,  \
-                                         T*, int);                                                                 \
-  EXTERN template void backward_dq<T, V, HB>(const rana::Op<T>&, const T*, const T*, const T*, const T*, const T*, \
-                                             const T*, const QueryIndex&, T*, int);                                \
+  EXTERN template void forward<T, V, HB>(const rana::Op<T>&, const Operand<T>&, const T*, const T*,             \
+                                         const QueryIndex&, T*, T*, int);                                          \
+  EXTERN template void backward_dq<T, V, HB>(const rana::Op<T>&, const Operand<T>&, const Operand<T>&, const T*,  \
+                                             const T*, const T*, const T*, const QueryIndex&, const Output<T>&,    \
+                                             int);                                                                 \
   EXTERN template void backward_dkdv<T, V, HB>(const rana::Op<T>&, const T*, const T*, const T*, const T*,         \
-                                               const T*, const T*, const int64_t*, T*, T*, T*, int);
+                                               const Operand<T>&, const Operand<T>&, const int64_t*,               \
+                                               const Output<T>&, const Output<T>&, T*, int);
 
 #define RANA_CPU_EXTERN extern
 RANA_CPU_KERNELS(RANA_CPU_EXTERN, float, rana::f32x16, 4)

@@ -390,6 +390,21 @@ struct Op {
   bool has_bias = false;
 };
 
+// A [N, H, d] operand read per entry (queries of a block, keys of a key block): element (n, h, c) at
+// p[n * sN + h * sH + c * sC]. Natural layout: (H d, d, 1); channel-major ([N, d, H] storage): (d H, 1, H).
+template <typename T>
+struct Operand {
+  const T* p;
+  int64_t sN, sH, sC;
+};
+
+// An output in the same terms (gradients are written in their input's layout).
+template <typename T>
+struct Output {
+  T* p;
+  int64_t sN, sH, sC;
+};
+
 // The bias and mask of one key pixel for every lane: disc row r, x as for lane_bias. With a permute table (float,
 // 16 lanes, AVX-512) a permute and two compares; otherwise the gather of lane_bias.
 template <typename V>
@@ -461,10 +476,10 @@ RANA_HD void axpy_rows(V* acc, V w, const typename Lanes<V>::T* __restrict__ row
   for (int c = 0; c < D; ++c) acc[c] += w * load_chunk<V, HB>(row + c * H);
 }
 
-// Loads the block's rows of x [N, H, D] (times mul) into D lane vectors (0 for padding lanes). Staged through a
-// scalar array: writing single lanes of out[] would force the whole array into memory.
+// Loads the block's rows of x (times mul) into D lane vectors (0 for padding lanes). Staged through a scalar
+// array: writing single lanes of out[] would force the whole array into memory.
 template <typename V, int HB, int D>
-RANA_HD void load_lanes(const typename Lanes<V>::T* x, const Block<Lanes<V>::L / HB>& b, int h0, int H,
+RANA_HD void load_lanes(const Operand<typename Lanes<V>::T>& x, const Block<Lanes<V>::L / HB>& b, int h0,
                         typename Lanes<V>::T mul, V* out) {
   using T = typename Lanes<V>::T;
   constexpr int L = Lanes<V>::L;
@@ -472,9 +487,9 @@ RANA_HD void load_lanes(const typename Lanes<V>::T* x, const Block<Lanes<V>::L /
   for (int l = 0; l < L; ++l) {
     const int e = l / HB;
     if (e < b.n) {
-      const T* row = x + (b.id[e] * H + h0 + l % HB) * D;
+      const T* row = x.p + b.id[e] * x.sN + (h0 + l % HB) * x.sH;
       RANA_UNROLL
-      for (int c = 0; c < D; ++c) tmp[c * L + l] = row[c] * mul;
+      for (int c = 0; c < D; ++c) tmp[c * L + l] = row[c * x.sC] * mul;
     } else {
       RANA_UNROLL
       for (int c = 0; c < D; ++c) tmp[c * L + l] = T(0);
@@ -484,13 +499,14 @@ RANA_HD void load_lanes(const typename Lanes<V>::T* x, const Block<Lanes<V>::L /
   for (int c = 0; c < D; ++c) out[c] = load_vector<V>(tmp + c * L);
 }
 
-// Writes D lane vectors to the block's rows of x [N, H, D].
+// Writes D lane vectors to the block's rows of x.
 template <typename V, int HB, int D>
-RANA_HD void store_lanes(const V* in, const Block<Lanes<V>::L / HB>& b, int h0, int H, typename Lanes<V>::T* x) {
+RANA_HD void store_lanes(const V* in, const Block<Lanes<V>::L / HB>& b, int h0,
+                         const Output<typename Lanes<V>::T>& x) {
   for (int l = 0; l < b.n * HB; ++l) {
-    typename Lanes<V>::T* row = x + (b.id[l / HB] * H + h0 + l % HB) * D;
+    typename Lanes<V>::T* row = x.p + b.id[l / HB] * x.sN + (h0 + l % HB) * x.sH;
     RANA_UNROLL
-    for (int c = 0; c < D; ++c) row[c] = lane(in[c], l);
+    for (int c = 0; c < D; ++c) row[c * x.sC] = lane(in[c], l);
   }
 }
 
@@ -507,18 +523,19 @@ RANA_HD V load_lane_scalars(const typename Lanes<V>::T* x, const Block<Lanes<V>:
 
 // ---- forward: one query block, heads h0 .. h0 + HB - 1 --------------------------------------------------
 // Online softmax over the keys of the block's discs, buffered: logits of up to NB keys are kept, then one step
-// per full buffer rescales and accumulates p * v. q [Nq, H, DK] (natural layout); kt [Nk, DK, H] and
+// per full buffer rescales and accumulates p * v. q [Nq, H, DK] (any Operand layout); kt [Nk, DK, H] and
 // vt [Nk, DV, H] (channel-major per key, so one load serves HB heads). Writes out [Nq, H, DV] and lse [Nq, H]
 // (-inf and zeros for a query whose disc holds no key bins).
 template <typename V, int HB, int DK, int DV, int NB, typename W>
 RANA_HD void forward_block(const Op<typename Lanes<V>::T>& op, const Block<Lanes<V>::L / HB>& b,
-                           const LaneTable<Lanes<V>::L>& lt, W walk, int h0, const typename Lanes<V>::T* q,
-                           const typename Lanes<V>::T* __restrict__ kt, const typename Lanes<V>::T* __restrict__ vt,
-                           typename Lanes<V>::T* out, typename Lanes<V>::T* lse) {
+                           const LaneTable<Lanes<V>::L>& lt, W walk, int h0,
+                           const Operand<typename Lanes<V>::T>& q, const typename Lanes<V>::T* __restrict__ kt,
+                           const typename Lanes<V>::T* __restrict__ vt, typename Lanes<V>::T* out,
+                           typename Lanes<V>::T* lse) {
   using T = typename Lanes<V>::T;
   const int H = op.H;
   V qr[DK], acc_mem[DV];
-  load_lanes<V, HB, DK>(q, b, h0, H, op.scale, qr);
+  load_lanes<V, HB, DK>(q, b, h0, op.scale, qr);
   RANA_UNROLL
   for (int c = 0; c < DV; ++c) acc_mem[c] = splat<V>(0);
   keep_in_memory(acc_mem);
@@ -581,25 +598,26 @@ RANA_HD void forward_block(const Op<typename Lanes<V>::T>& op, const Block<Lanes
   const V inv = T(1) / (l + empty);
   RANA_UNROLL
   for (int c = 0; c < DV; ++c) acc_mem[c] *= inv;
-  store_lanes<V, HB, DV>(acc_mem, b, h0, H, out);
+  store_lanes<V, HB, DV>(acc_mem, b, h0, Output<T>{out, int64_t(H) * DV, DV, 1});
   for (int i = 0; i < b.n * HB; ++i)
     lse[b.id[i / HB] * H + h0 + i % HB] = lane(l, i) == T(0) ? neg_inf<T>() : lane(m, i) + std::log(lane(l, i));
 }
 
 // ---- backward, dQ: one query block, heads h0 .. h0 + HB - 1 ----------------------------------------------
 // FlashAttention-2: p = exp(s - lse), ds = p (dO.v - delta), dq = scale sum ds k. lse must be +inf (not -inf)
-// for queries with an empty disc, giving p = 0. q, dout [Nq, H, d], lse, delta [Nq, H]; kt, vt as in the
+// for queries with an empty disc, giving p = 0. q, dout [Nq, H, d] (Operands), lse, delta [Nq, H]; kt, vt as in the
 // forward. Writes dq [Nq, H, DK].
 template <typename V, int HB, int DK, int DV, int NB, typename W>
 RANA_HD void backward_dq_block(const Op<typename Lanes<V>::T>& op, const Block<Lanes<V>::L / HB>& b,
-                               const LaneTable<Lanes<V>::L>& lt, W walk, int h0, const typename Lanes<V>::T* q,
-                               const typename Lanes<V>::T* dout, const typename Lanes<V>::T* lse,
+                               const LaneTable<Lanes<V>::L>& lt, W walk, int h0,
+                               const Operand<typename Lanes<V>::T>& q, const Operand<typename Lanes<V>::T>& dout,
+                               const typename Lanes<V>::T* lse,
                                const typename Lanes<V>::T* delta, const typename Lanes<V>::T* __restrict__ kt,
-                               const typename Lanes<V>::T* __restrict__ vt, typename Lanes<V>::T* dq) {
+                               const typename Lanes<V>::T* __restrict__ vt, const Output<typename Lanes<V>::T>& dq) {
   using T = typename Lanes<V>::T;
   const int H = op.H;
   V qr[DK], acc_mem[DK];
-  load_lanes<V, HB, DK>(q, b, h0, H, op.scale, qr);
+  load_lanes<V, HB, DK>(q, b, h0, op.scale, qr);
   RANA_UNROLL
   for (int c = 0; c < DK; ++c) acc_mem[c] = splat<V>(0);
   keep_in_memory(acc_mem);
@@ -610,7 +628,7 @@ RANA_HD void backward_dq_block(const Op<typename Lanes<V>::T>& op, const Block<L
   auto flush = [&](int nb) RANA_NOINLINE {  // nb by value (see forward_block)
     {
       V dr[DV];
-      load_lanes<V, HB, DV>(dout, b, h0, H, T(1), dr);
+      load_lanes<V, HB, DV>(dout, b, h0, T(1), dr);
       for (int i = 0; i < nb; ++i) {
         const V dp = dot_rows<V, HB, DV>(dr, vt + key[i] * DV * H + h0, H, splat<V>(0));
         s[i] = fast_exp(s[i] - L) * (dp - D);
@@ -643,13 +661,13 @@ RANA_HD void backward_dq_block(const Op<typename Lanes<V>::T>& op, const Block<L
   flush(nb);
   RANA_UNROLL
   for (int c = 0; c < DK; ++c) acc_mem[c] *= op.scale;
-  store_lanes<V, HB, DK>(acc_mem, b, h0, H, dq);
+  store_lanes<V, HB, DK>(acc_mem, b, h0, dq);
 }
 
 // ---- backward, dK and dV: one key block, heads h0 .. h0 + HB - 1 -----------------------------------------
 // From the reverse neighbourhood: the queries whose disc holds a key of the block, sorted by centre pixel and
 // given in that order: qst [Nq, DK, H], dost [Nq, DV, H] (channel-major), lse_s, delta_s [Nq, H] (lse +inf for
-// queries with an empty disc). k, v [Nk, H, d]. Sums run in a fixed order without atomics. dbias_lanes (may be
+// queries with an empty disc). k, v [Nk, H, d] (Operands). Sums run in a fixed order without atomics. dbias_lanes (may be
 // null): per-lane accumulators [L][rows.n][tw], ds added at (lane, r, centre + dx); the caller sums them into
 // the bias gradient of each lane's head.
 template <typename V, int HB, int DK, int DV, int NB, typename W>
@@ -657,8 +675,9 @@ RANA_HD void backward_dkdv_block(const Op<typename Lanes<V>::T>& op, const Block
                                  const LaneTable<Lanes<V>::L>& lt, W walk, int h0,
                                  const typename Lanes<V>::T* __restrict__ qst,
                                  const typename Lanes<V>::T* __restrict__ dost, const typename Lanes<V>::T* lse_s,
-                                 const typename Lanes<V>::T* delta_s, const typename Lanes<V>::T* k,
-                                 const typename Lanes<V>::T* v, typename Lanes<V>::T* dk, typename Lanes<V>::T* dv,
+                                 const typename Lanes<V>::T* delta_s, const Operand<typename Lanes<V>::T>& k,
+                                 const Operand<typename Lanes<V>::T>& v, const Output<typename Lanes<V>::T>& dk,
+                                 const Output<typename Lanes<V>::T>& dv,
                                  typename Lanes<V>::T* dbias_lanes) {
   using T = typename Lanes<V>::T;
   constexpr int L = Lanes<V>::L;
@@ -676,7 +695,7 @@ RANA_HD void backward_dkdv_block(const Op<typename Lanes<V>::T>& op, const Block
   auto flush = [&](int nb) RANA_NOINLINE {  // nb by value (see forward_block)
     {
       V vr[DV];
-      load_lanes<V, HB, DV>(v, b, h0, H, T(1), vr);
+      load_lanes<V, HB, DV>(v, b, h0, T(1), vr);
       for (int i = 0; i < nb; ++i) {
         const V dp = dot_rows<V, HB, DV>(vr, dost + qid[i] * DV * H + h0, H, splat<V>(0));
         const V pi = fast_exp(s[i] - load_chunk<V, HB>(lse_s + qid[i] * H + h0));
@@ -716,7 +735,7 @@ RANA_HD void backward_dkdv_block(const Op<typename Lanes<V>::T>& op, const Block
   int nb = 0;
   {
     V kr[DK];
-    load_lanes<V, HB, DK>(k, b, h0, H, op.scale, kr);
+    load_lanes<V, HB, DK>(k, b, h0, op.scale, kr);
     int r;
     int32_t x;
     int64_t first, last;
@@ -737,8 +756,8 @@ RANA_HD void backward_dkdv_block(const Op<typename Lanes<V>::T>& op, const Block
   flush(nb);
   RANA_UNROLL
   for (int c = 0; c < DK; ++c) acc_k[c] *= op.scale;
-  store_lanes<V, HB, DK>(acc_k, b, h0, H, dk);
-  store_lanes<V, HB, DV>(acc_v, b, h0, H, dv);
+  store_lanes<V, HB, DK>(acc_k, b, h0, dk);
+  store_lanes<V, HB, DV>(acc_v, b, h0, dv);
   (void)L;
 }
 

@@ -130,6 +130,25 @@ def test_head_counts_and_wide_discs(heads, radius):
         torch.testing.assert_close(x, y, atol=1e-5 * max(1.0, float(y.abs().max())), rtol=1e-5)
 
 
+def test_channel_major_inputs_need_no_copy_and_agree():
+    """q, k, v given as transposed views of contiguous [N, d, H] tensors (as a projection can write them)."""
+    qp, ko, ks = {n: (a, b, c) for n, a, b, c in layouts()}["self"]
+    nq, nk = _counts("self")
+    g = torch.Generator().manual_seed(5)
+    cm = [torch.randn(n, 16, 4, generator=g) for n in (nq, nk, nk)]  # [N, d, H] storage
+    bias = torch.randn(4, 5, 5)
+    res = []
+    for inputs in ([x.transpose(1, 2) for x in cm], [x.transpose(1, 2).contiguous() for x in cm]):
+        ts = [t.detach().clone() if t.is_contiguous() else t.detach() for t in inputs]
+        ts = [t.requires_grad_(True) for t in ts] + [bias.clone().requires_grad_(True)]
+        out = rana(*ts[:3], qp, ko, ks, 2.5, ts[3], backend="cpu")
+        res.append((out, *torch.autograd.grad(out, ts, torch.linspace(-1, 1, out.numel()).reshape(out.shape))))
+    for x, y in zip(*res):
+        torch.testing.assert_close(x.detach(), y.detach(), atol=1e-6, rtol=1e-6)
+    ref = rana(*[x.transpose(1, 2) for x in cm], qp, ko, ks, 2.5, bias, backend="reference")
+    torch.testing.assert_close(res[0][0].detach(), ref, atol=1e-5, rtol=1e-5)
+
+
 def _counts(name):
     """(queries, key bins) of one of the test layouts."""
     qp, ko, _ = {n: (a, b, c) for n, a, b, c in layouts()}[name]

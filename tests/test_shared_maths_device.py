@@ -35,9 +35,13 @@ __global__ void smoke(Op<float> op, const float* q, const float* kt, const float
   const LaneTable<1> lq = lane_table<1, 1>(b, op.rows, op.H, h, 1), lk = lane_table<1, 1>(b, op.rows, op.H, h, -1);
   const PixelWalk keys{op.g, op.rows, op.g.offsets, 1, b.y, b.x0, 0};
   const PixelWalk queries{op.g, op.rows, q_ptr, -1, b.y, b.x0, 0};
-  forward_block<float, 1, 16, 16, 32>(op, b, lq, keys, h, q, kt, vt, out, lse_out);
-  backward_dq_block<float, 1, 16, 16, 32>(op, b, lq, keys, h, q, dout, lse, delta, kt, vt, dq);
-  backward_dkdv_block<float, 1, 16, 16, 32>(op, b, lk, queries, h, qst, dost, lse, delta, k, v, dk, dv, dbias_lanes);
+  const Operand<float> qo{q, op.H * 16, 16, 1}, dout_o{dout, op.H * 16, 16, 1};
+  const Operand<float> ko{k, op.H * 16, 16, 1}, vo{v, op.H * 16, 16, 1};
+  forward_block<float, 1, 16, 16, 32>(op, b, lq, keys, h, qo, kt, vt, out, lse_out);
+  const Output<float> dq_o{dq, op.H * 16, 16, 1}, dk_o{dk, op.H * 16, 16, 1}, dv_o{dv, op.H * 16, 16, 1};
+  backward_dq_block<float, 1, 16, 16, 32>(op, b, lq, keys, h, qo, dout_o, lse, delta, kt, vt, dq_o);
+  backward_dkdv_block<float, 1, 16, 16, 32>(op, b, lk, queries, h, qst, dost, lse, delta, ko, vo, dk_o, dv_o,
+                                            dbias_lanes);
 }
 """
 

@@ -111,6 +111,12 @@ def _validate(q, k, v, q_pixels, k_offsets, k_size, radius, bias):
     return hk, wk
 
 
+def _kernel_layout(x: torch.Tensor) -> torch.Tensor:
+    """x as the C++ kernels take it: contiguous [N, H, d], or kept channel-major when it is the transposed view of
+    a contiguous [N, d, H] tensor (a projection can write k and v that way, and the kernels then skip a copy)."""
+    return x if x.is_contiguous() or x.transpose(1, 2).is_contiguous() else x.contiguous()
+
+
 def rana(q: torch.Tensor, k: torch.Tensor, v: torch.Tensor, q_pixels: torch.Tensor, k_offsets: torch.Tensor,
          k_size: tuple[int, int], radius: float, bias: torch.Tensor | None = None,
          backend: Backend = "auto") -> torch.Tensor:
@@ -129,7 +135,7 @@ def rana(q: torch.Tensor, k: torch.Tensor, v: torch.Tensor, q_pixels: torch.Tens
     use_cpu = backend in ("cpu", "cpu-scalar") or (backend == "auto" and q.device.type == "cpu" and cpu_extension_or_none())
     if not use_cpu:
         return rana_reference(q, k, v, q_pixels, k_offsets, (hk, wk), radius, bias)
-    q, k, v = q.contiguous(), k.contiguous(), v.contiguous()
+    q, k, v = (_kernel_layout(x) for x in (q, k, v))
     q_pixels = q_pixels.to(torch.int64).contiguous()
     k_offsets = k_offsets.to(torch.int64).contiguous()
     if bias is not None:
