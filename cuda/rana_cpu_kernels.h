@@ -138,10 +138,10 @@ void dispatch_dims(int dk, int dv, F&& f) {
 using rana::Operand;
 using rana::Output;
 
-// Forward over every query block: q [Nq, H, dk] (any Operand layout); kt [Nk, dk, H], vt [Nk, dv, H]; out [Nq, H, dv], lse [Nq, H].
-template <typename T, typename V, int HB>
-void forward(const rana::Op<T>& op, const Operand<T>& q, const T* kt, const T* vt, const QueryIndex& qi, T* out,
-             T* lse, int threads) {
+// Calls body.template operator()<DK, DV>(block, lane table, walk, h0) for every query block and head group, the
+// blocks spread over the threads (each output row is written by one call).
+template <typename T, typename V, int HB, typename F>
+void over_query_blocks(const rana::Op<T>& op, const QueryIndex& qi, int threads, F&& body) {
   constexpr int L = rana::Lanes<V>::L, Q = L / HB;
   const auto blocks = make_blocks(qi.ptr, op.g.Hk, op.g.Wk, Q, threads);
   dispatch_dims<V>(op.dk, op.dv, [&]<int DK, int DV>() {
@@ -154,10 +154,20 @@ void forward(const rana::Op<T>& op, const Operand<T>& q, const T* kt, const T* v
         const int n = rana::record_runs(rana::PixelWalk{op.g, op.rows, op.g.offsets, 1, b.y, b.x0, b.span},
                                         runs.data());
         for (int h0 = 0; h0 < op.H; h0 += HB)
-          rana::forward_block<V, HB, DK, DV, kBuffer>(op, b, rana::lane_table<L, HB>(b, op.rows, op.H, h0, 1),
-                                                      rana::RunWalk{runs.data(), n}, h0, q, kt, vt, out, lse);
+          body.template operator()<DK, DV>(b, rana::lane_table<L, HB>(b, op.rows, op.H, h0, 1),
+                                           rana::RunWalk{runs.data(), n}, h0);
       }
     }
+  });
+}
+
+// Forward over every query block: q [Nq, H, dk] (any Operand layout); kt [Nk, dk, H], vt [Nk, dv, H];
+// out [Nq, H, dv], lse [Nq, H].
+template <typename T, typename V, int HB>
+void forward(const rana::Op<T>& op, const Operand<T>& q, const T* kt, const T* vt, const QueryIndex& qi, T* out,
+             T* lse, int threads) {
+  over_query_blocks<T, V, HB>(op, qi, threads, [&]<int DK, int DV>(const auto& b, const auto& lt, auto walk, int h0) {
+    rana::forward_block<V, HB, DK, DV, kBuffer>(op, b, lt, walk, h0, q, kt, vt, out, lse);
   });
 }
 
@@ -166,23 +176,8 @@ void forward(const rana::Op<T>& op, const Operand<T>& q, const T* kt, const T* v
 template <typename T, typename V, int HB>
 void backward_dq(const rana::Op<T>& op, const Operand<T>& q, const Operand<T>& dout, const T* lse, const T* delta,
                  const T* kt, const T* vt, const QueryIndex& qi, const Output<T>& dq, int threads) {
-  constexpr int L = rana::Lanes<V>::L, Q = L / HB;
-  const auto blocks = make_blocks(qi.ptr, op.g.Hk, op.g.Wk, Q, threads);
-  dispatch_dims<V>(op.dk, op.dv, [&]<int DK, int DV>() {
-#pragma omp parallel num_threads(threads)
-    {
-      std::vector<rana::PixelRun> runs(rana::max_runs(op.rows));
-#pragma omp for schedule(dynamic, 16)
-      for (size_t i = 0; i < blocks.size(); ++i) {
-        const Block<Q> b = fill_block<Q>(blocks[i], qi.ptr, op.g.Wk, qi.order);
-        const int n = rana::record_runs(rana::PixelWalk{op.g, op.rows, op.g.offsets, 1, b.y, b.x0, b.span},
-                                        runs.data());
-        for (int h0 = 0; h0 < op.H; h0 += HB)
-          rana::backward_dq_block<V, HB, DK, DV, kBuffer>(op, b, rana::lane_table<L, HB>(b, op.rows, op.H, h0, 1),
-                                                          rana::RunWalk{runs.data(), n}, h0, q, dout, lse, delta, kt,
-                                                          vt, dq);
-      }
-    }
+  over_query_blocks<T, V, HB>(op, qi, threads, [&]<int DK, int DV>(const auto& b, const auto& lt, auto walk, int h0) {
+    rana::backward_dq_block<V, HB, DK, DV, kBuffer>(op, b, lt, walk, h0, q, dout, lse, delta, kt, vt, dq);
   });
 }
 

@@ -521,6 +521,33 @@ RANA_HD V load_lane_scalars(const typename Lanes<V>::T* x, const Block<Lanes<V>:
   return load_vector<V>(tmp);
 }
 
+// Streams the logits of a query block against every key of the walk into the buffer s (key indices in key),
+// calling flush(nb) whenever the buffer is full and once at the end. The value rows a flush will read (vt, dv
+// channels) are prefetched meanwhile. Shared by the forward and the dQ pass.
+template <typename V, int HB, int DK, int NB, typename W, typename F>
+RANA_HD void stream_logits(const Op<typename Lanes<V>::T>& op, const LaneTable<Lanes<V>::L>& lt, W& walk, int h0,
+                           const V* qr, const typename Lanes<V>::T* __restrict__ kt,
+                           const typename Lanes<V>::T* __restrict__ vt, int dv, V* s, int64_t* key, F& flush) {
+  const int H = op.H;
+  int r;
+  int32_t x;
+  int64_t first, last;
+  int nb = 0;
+  while (walk.next(r, x, first, last)) {
+    const V bv = key_pixel_bias<V>(op, lt, r, x);
+    for (int64_t j = first; j < last; ++j) {
+      if (nb == NB) {
+        flush(nb);
+        nb = 0;
+      }
+      RANA_PREFETCH(vt + j * dv * H);
+      s[nb] = dot_rows<V, HB, DK>(qr, kt + j * DK * H + h0, H, bv);
+      key[nb++] = j;
+    }
+  }
+  flush(nb);
+}
+
 // ---- forward: one query block, heads h0 .. h0 + HB - 1 --------------------------------------------------
 // Online softmax over the keys of the block's discs, buffered: logits of up to NB keys are kept, then one step
 // per full buffer rescales and accumulates p * v. q [Nq, H, DK] (any Operand layout); kt [Nk, DK, H] and
@@ -577,23 +604,7 @@ RANA_HD void forward_block(const Op<typename Lanes<V>::T>& op, const Block<Lanes
     keep_in_memory(acc_mem);
     m = mn;
   };
-  int r;
-  int32_t x;
-  int64_t first, last;
-  int nb = 0;
-  while (walk.next(r, x, first, last)) {
-    const V bv = key_pixel_bias<V>(op, lt, r, x);
-    for (int64_t j = first; j < last; ++j) {
-      if (nb == NB) {
-        flush(nb);
-        nb = 0;
-      }
-      RANA_PREFETCH(vt + j * DV * H);
-      s[nb] = dot_rows<V, HB, DK>(qr, kt + j * DK * H + h0, H, bv);
-      key[nb++] = j;
-    }
-  }
-  flush(nb);
+  stream_logits<V, HB, DK, NB>(op, lt, walk, h0, qr, kt, vt, DV, s, key, flush);
   const V empty = l == T(0) ? splat<V>(1) : splat<V>(0);
   const V inv = T(1) / (l + empty);
   RANA_UNROLL
@@ -642,23 +653,7 @@ RANA_HD void backward_dq_block(const Op<typename Lanes<V>::T>& op, const Block<L
     for (int c = 0; c < DK; ++c) acc_mem[c] = acc[c];
     keep_in_memory(acc_mem);
   };
-  int r;
-  int32_t x;
-  int64_t first, last;
-  int nb = 0;
-  while (walk.next(r, x, first, last)) {
-    const V bv = key_pixel_bias<V>(op, lt, r, x);
-    for (int64_t j = first; j < last; ++j) {
-      if (nb == NB) {
-        flush(nb);
-        nb = 0;
-      }
-      RANA_PREFETCH(vt + j * DV * H);
-      s[nb] = dot_rows<V, HB, DK>(qr, kt + j * DK * H + h0, H, bv);
-      key[nb++] = j;
-    }
-  }
-  flush(nb);
+  stream_logits<V, HB, DK, NB>(op, lt, walk, h0, qr, kt, vt, DV, s, key, flush);
   RANA_UNROLL
   for (int c = 0; c < DK; ++c) acc_mem[c] *= op.scale;
   store_lanes<V, HB, DK>(acc_mem, b, h0, dq);
