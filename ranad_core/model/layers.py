@@ -1,0 +1,102 @@
+"""The RaNAD building blocks on ragged bins (paper Sec. 4.1): multi-head RaNA, the RaNA block, bin dropout.
+
+Features are per-bin tensors [N, C] in a layout given by ragged offsets over an H x W grid (one convention
+everywhere, see DESIGN.md). Projections write q, k and v channel-major (the Linear output viewed as [N, d, H],
+then transposed to the op's [N, H, d]): the C++ kernels stream that layout without a copy, and any fixed order of
+a learned layer's outputs is as good as another.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import torch
+from torch import nn
+
+from ..rana import bin_pixels, disc, rana
+
+
+@dataclass
+class Layout:
+    """Bins of one scale: offsets [H*W+1] over the grid, and each bin's (y, x) (cached: every layer needs it)."""
+    offsets: torch.Tensor
+    height: int
+    width: int
+    pixels: torch.Tensor
+
+    @classmethod
+    def of(cls, offsets: torch.Tensor, height: int, width: int) -> "Layout":
+        offsets = torch.as_tensor(offsets, dtype=torch.int64)
+        return cls(offsets, height, width, bin_pixels(offsets, width))
+
+    @property
+    def size(self) -> tuple[int, int]:
+        return (self.height, self.width)
+
+    @property
+    def bins(self) -> int:
+        return int(self.offsets[-1])
+
+
+def bin_dropout(layout: Layout, pattern: int) -> tuple[torch.Tensor, Layout]:
+    """Deterministic bin dropout (down-sampling): bin b of pixel (y, x) is kept when b + y + x + pattern is even.
+
+    Every pixel keeps about half of its bins and single-bin pixels survive in a checkerboard, so each level holds
+    about half the bins; pattern 0/1 alternate between U-Nets so no bin is always dropped. Returns (kept row
+    indices into the fine layout, the coarse layout).
+    """
+    offs = layout.offsets
+    counts = offs[1:] - offs[:-1]
+    pix = layout.pixels[:, 0] * layout.width + layout.pixels[:, 1]
+    within = torch.arange(layout.bins) - torch.repeat_interleave(offs[:-1], counts, output_size=layout.bins)
+    keep = (within + layout.pixels[:, 0] + layout.pixels[:, 1] + pattern) % 2 == 0
+    kept = torch.nonzero(keep, as_tuple=False).flatten()
+    coarse = torch.bincount(pix[kept], minlength=counts.numel())
+    coarse_offs = torch.cat([coarse.new_zeros(1), torch.cumsum(coarse, 0)])
+    return kept, Layout(coarse_offs, layout.height, layout.width, layout.pixels[kept])
+
+
+class MultiHeadRaNA(nn.Module):
+    """Eq. 5: q from the query bins' features, k and v from the key bins', RaNA per head, heads concatenated
+    and projected. A learned relative-position bias per head (zero at start) adds the position awareness a
+    disc of bins otherwise lacks."""
+
+    def __init__(self, q_dim: int, kv_dim: int, out_dim: int, heads: int, head_dim: int, radius: float,
+                 backend: str = "auto"):
+        super().__init__()
+        self.heads, self.head_dim, self.radius, self.backend = heads, head_dim, float(radius), backend
+        inner = heads * head_dim
+        self.q = nn.Linear(q_dim, inner)
+        self.k = nn.Linear(kv_dim, inner)
+        self.v = nn.Linear(kv_dim, inner)
+        self.out = nn.Linear(inner, out_dim)
+        side = disc(radius).side
+        self.bias = nn.Parameter(torch.zeros(heads, side, side))
+
+    def _heads(self, x: torch.Tensor) -> torch.Tensor:
+        return x.view(x.shape[0], self.head_dim, self.heads).transpose(1, 2)  # channel-major [N, H, d] view
+
+    def forward(self, q_feat: torch.Tensor, kv_feat: torch.Tensor, q_pixels: torch.Tensor,
+                keys: Layout) -> torch.Tensor:
+        q, k, v = self._heads(self.q(q_feat)), self._heads(self.k(kv_feat)), self._heads(self.v(kv_feat))
+        y = rana(q, k, v, q_pixels, keys.offsets, keys.size, self.radius, self.bias, backend=self.backend)
+        return self.out(y.reshape(y.shape[0], -1))
+
+
+class RaNABlock(nn.Module):
+    """Fig. 4 / Eq. 5-7: z = F + MHRaNA(F), out = z + FC2(ReLU(FC1(z))), with a LayerNorm before each branch
+    (pre-norm: the residual stream stays unnormalised, which keeps deep stacks trainable)."""
+
+    def __init__(self, dim: int, heads: int, head_dim: int, radius: float, mlp_ratio: float = 2.0,
+                 backend: str = "auto"):
+        super().__init__()
+        self.norm1 = nn.LayerNorm(dim)
+        self.attn = MultiHeadRaNA(dim, dim, dim, heads, head_dim, radius, backend)
+        self.norm2 = nn.LayerNorm(dim)
+        hidden = int(dim * mlp_ratio)
+        self.mlp = nn.Sequential(nn.Linear(dim, hidden), nn.ReLU(), nn.Linear(hidden, dim))
+
+    def forward(self, feat: torch.Tensor, layout: Layout) -> torch.Tensor:
+        x = self.norm1(feat)
+        z = feat + self.attn(x, x, layout.pixels, layout)
+        return z + self.mlp(self.norm2(z))

@@ -1,0 +1,68 @@
+"""Multi-scale kernel reconstruction (paper Sec. 4.1.3, Fig. 7): the denoised layer is attention applied to noisy
+values, so it is linear in them, and the same weights denoise any AOV batched into the value channels.
+
+Stage 1 (pyramid): bin dropout picks sparser query bins; RaNA with those bins' embeddings as queries, the finer
+scale's embeddings as keys and its (blurred) layer as values gives the next, blurrier scale, with the radius
+growing per scale. Stage 2 (per-scale denoising): full-resolution embeddings query each scale's embeddings, with
+that scale's layer as values. Stage 3: a scale mixer (FC + softmax over scales) weights the per-scale results.
+Every step is a softmax-weighted average of values, so output(a x + b y) = a output(x) + b output(y).
+"""
+
+from __future__ import annotations
+
+import torch
+from torch import nn
+
+from ..rana import rana
+from .layers import Layout, bin_dropout
+
+
+class KernelAttention(nn.Module):
+    """Single-purpose RaNA whose values are the noisy layer itself (no value projection): the kernel weights
+    come from the embeddings, the values pass through untouched, which is what keeps the output linear."""
+
+    def __init__(self, dim: int, heads: int, head_dim: int, radius: float, backend: str = "auto"):
+        super().__init__()
+        from ..rana import disc
+
+        self.heads, self.head_dim, self.radius, self.backend = heads, head_dim, float(radius), backend
+        self.q = nn.Linear(dim, heads * head_dim)
+        self.k = nn.Linear(dim, heads * head_dim)
+        self.bias = nn.Parameter(torch.zeros(heads, disc(radius).side, disc(radius).side))
+        self.head_mix = nn.Parameter(torch.zeros(heads))  # softmax over heads: a convex mix of head kernels
+
+    def forward(self, q_feat, k_feat, q_pixels, keys: Layout, values: torch.Tensor) -> torch.Tensor:
+        """values [Nk, C] -> [Nq, C]: each head's kernel applied to all C value channels, heads mixed convexly."""
+        H, d = self.heads, self.head_dim
+        q = self.q(q_feat).view(-1, d, H).transpose(1, 2)
+        k = self.k(k_feat).view(-1, d, H).transpose(1, 2)
+        v = values.unsqueeze(1).expand(-1, H, -1)
+        y = rana(q, k, v, q_pixels, keys.offsets, keys.size, self.radius, self.bias, backend=self.backend)
+        return (y * torch.softmax(self.head_mix, 0)[None, :, None]).sum(1)
+
+
+class Reconstruction(nn.Module):
+    """One output layer's reconstruction module (number of scales, radii and dropout pattern per layer)."""
+
+    def __init__(self, dim: int, scales: int = 3, heads: int = 2, head_dim: int = 8, radius: float = 2.5,
+                 radius_growth: float = 1.0, backend: str = "auto"):
+        super().__init__()
+        self.scales = scales
+        radii = [radius + radius_growth * s for s in range(scales)]
+        self.down = nn.ModuleList(KernelAttention(dim, heads, head_dim, radii[s], backend) for s in range(scales - 1))
+        self.per_scale = nn.ModuleList(KernelAttention(dim, heads, head_dim, radii[s], backend) for s in range(scales))
+        self.mixer = nn.Linear(dim, scales)
+
+    def forward(self, feat: torch.Tensor, layout: Layout, noisy: torch.Tensor) -> torch.Tensor:
+        """feat [N, dim] backbone embeddings, noisy [N, C] layer values (any C: AOVs batch here) -> [N, C]."""
+        feats, layouts, images = [feat], [layout], [noisy]
+        for s in range(self.scales - 1):  # stage 1: the pyramid of blurred layers
+            kept, coarse = bin_dropout(layouts[-1], s % 2)
+            q_feat = feats[-1][kept]
+            images.append(self.down[s](q_feat, feats[-1], coarse.pixels, layouts[-1], images[-1]))
+            feats.append(q_feat)
+            layouts.append(coarse)
+        outs = [self.per_scale[s](feat, feats[s], layout.pixels, layouts[s], images[s])  # stage 2
+                for s in range(self.scales)]
+        w = torch.softmax(self.mixer(feat), dim=1)  # stage 3: per-bin convex mix of the scales
+        return sum(w[:, s:s + 1] * outs[s] for s in range(self.scales))
