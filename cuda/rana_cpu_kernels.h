@@ -217,7 +217,7 @@ void backward_dkdv(const rana::Op<T>& op, const T* qst, const T* dost, const T* 
             for (int r = 0; r < n_rows; ++r)
               for (int dx = op.rows.dx0[r]; dx <= op.rows.dx1[r]; ++dx)
                 part[(int64_t(h) * side + op.rows.dy[r] + R) * side + dx + R] +=
-                    lanes[g * lane_size + (int64_t(u) * n_rows + r) * tw + o + dx];
+                    lanes[g * lane_size + (int64_t(r) * tw + o + dx) * L + u];
           }
       }
     }

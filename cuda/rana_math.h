@@ -663,7 +663,7 @@ RANA_HD void backward_dq_block(const Op<typename Lanes<V>::T>& op, const Block<L
 // From the reverse neighbourhood: the queries whose disc holds a key of the block, sorted by centre pixel and
 // given in that order: qst [Nq, DK, H], dost [Nq, DV, H] (channel-major), lse_s, delta_s [Nq, H] (lse +inf for
 // queries with an empty disc). k, v [Nk, H, d] (Operands). Sums run in a fixed order without atomics. dbias_lanes (may be
-// null): per-lane accumulators [L][rows.n][tw], ds added at (lane, r, centre + dx); the caller sums them into
+// null): per-lane accumulators [rows.n][tw][L], ds added at (r, centre + dx, lane); the caller sums them into
 // the bias gradient of each lane's head.
 template <typename V, int HB, int DK, int DV, int NB, typename W>
 RANA_HD void backward_dkdv_block(const Op<typename Lanes<V>::T>& op, const Block<Lanes<V>::L / HB>& b,
@@ -721,8 +721,11 @@ RANA_HD void backward_dkdv_block(const Op<typename Lanes<V>::T>& op, const Block
         V sum = s[i];
         int e = i + 1;
         for (; e < nb && tag[e] == tag[i]; ++e) sum += s[e];
-        for (int u = 0; u < b.n * HB; ++u)
-          dbias_lanes[(u * op.rows.n) * tw + tag[i] + b.rel[u / HB]] += lane(sum, u);
+        // lane-minor tables: an entry's HB lanes are HB consecutive floats (one short vector add on the CPU)
+        for (int e = 0; e < b.n; ++e) {
+          typename Lanes<V>::T* dst = dbias_lanes + int64_t(tag[i] + b.rel[e]) * L + e * HB;
+          for (int hh = 0; hh < HB; ++hh) dst[hh] += lane(sum, e * HB + hh);
+        }
         i = e;
       }
     }
@@ -753,7 +756,6 @@ RANA_HD void backward_dkdv_block(const Op<typename Lanes<V>::T>& op, const Block
   for (int c = 0; c < DK; ++c) acc_k[c] *= op.scale;
   store_lanes<V, HB, DK>(acc_k, b, h0, dk);
   store_lanes<V, HB, DV>(acc_v, b, h0, dv);
-  (void)L;
 }
 
 }  // namespace rana
