@@ -4,7 +4,9 @@ from __future__ import annotations
 
 import torch
 
-from ranad_core.model import Layout, RaNABlock, Reconstruction, bin_dropout
+import pytest
+
+from ranad_core.model import CONFIGS, Layout, ModelConfig, MultiUNet, RaNABlock, Reconstruction, bin_dropout, get_config
 
 
 def layout(h=9, w=8, max_bins=5, seed=0):
@@ -53,3 +55,30 @@ def test_reconstruction_is_linear_in_the_noisy_values_and_batches_aovs():
         torch.testing.assert_close(both, torch.cat([fx, fy], 1), atol=1e-6, rtol=1e-6)
         # light groups that sum to the beauty give denoised groups that sum to the denoised beauty
         torch.testing.assert_close(fx + fy, rec(feat, lay, x + y), atol=1e-5, rtol=1e-5)
+
+
+def test_multi_unet_keeps_the_layout_and_trains():
+    lay = layout(h=10, w=9, seed=4)
+    torch.manual_seed(2)
+    net = MultiUNet(dim=16, unets=2, levels=2, blocks_per_level=1, heads=4, head_dim=4, radius=1.5,
+                    radius_growth=1.0)
+    feat = torch.randn(lay.bins, 16)
+    target = torch.randn(lay.bins, 16)
+    opt = torch.optim.Adam(net.parameters(), lr=3e-3)
+    losses = []
+    for _ in range(30):
+        loss = (net(feat, lay) - target).square().mean()
+        opt.zero_grad()
+        loss.backward()
+        opt.step()
+        losses.append(loss.item())
+    assert net(feat, lay).shape == feat.shape
+    assert losses[-1] < 0.8 * losses[0]
+
+
+def test_config_registry_round_trips():
+    for name, cfg in CONFIGS.items():
+        assert get_config(name) is cfg
+        assert ModelConfig.from_dict(cfg.to_dict()) == cfg
+    with pytest.raises(ValueError, match="unknown model config"):
+        get_config("nope")

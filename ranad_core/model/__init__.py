@@ -1,8 +1,11 @@
-"""The RaNAD denoiser (paper Sec. 4): building blocks on ragged bins (layers.py) and the multi-scale kernel
-reconstruction (reconstruction.py). The backbone, input processing and the config registry are being built
-(issue 5)."""
+"""The RaNAD denoiser (paper Sec. 4): building blocks on ragged bins (layers.py), the multi-U-Net backbone
+(backbone.py), the multi-scale kernel reconstruction (reconstruction.py) and the registry of named
+configurations (config.py). Input processing, the assembled model and training are being built (issue 5)."""
 
+from .backbone import MultiUNet, UNet
+from .config import CONFIGS, ModelConfig, ReconConfig, get_config
 from .layers import Layout, MultiHeadRaNA, RaNABlock, bin_dropout
 from .reconstruction import KernelAttention, Reconstruction
 
-__all__ = ["Layout", "MultiHeadRaNA", "RaNABlock", "bin_dropout", "KernelAttention", "Reconstruction"]
+__all__ = ["Layout", "MultiHeadRaNA", "RaNABlock", "bin_dropout", "KernelAttention", "Reconstruction", "UNet",
+           "MultiUNet", "CONFIGS", "ModelConfig", "ReconConfig", "get_config"]

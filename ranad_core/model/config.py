@@ -1,0 +1,67 @@
+"""Named model configurations (a registry, as timm's): a CPU-sized default and the paper's size.
+
+`ranad train --config NAME` and the model cards refer to these names; a checkpoint stores its config so that
+weights always load into the architecture they were trained with.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, field
+
+
+@dataclass(frozen=True)
+class ReconConfig:
+    scales: int = 3
+    heads: int = 2
+    head_dim: int = 8
+    radius: float = 2.5
+    radius_growth: float = 1.0
+
+
+@dataclass(frozen=True)
+class ModelConfig:
+    name: str
+    dim: int                     # embedding width of the backbone
+    unets: int                   # U-Nets in the multi-U-Net chain
+    levels: int                  # down-sampling steps per U-Net
+    blocks_per_level: int        # RaNA blocks per encoder/decoder stage
+    heads: int
+    head_dim: int
+    radius: float                # RaNA radius at full resolution
+    radius_growth: float         # added per coarser level
+    recon: dict = field(default_factory=dict)  # output layer -> ReconConfig (diffuse, specular, alpha, depth)
+
+    def to_dict(self) -> dict:
+        d = asdict(self)
+        d["recon"] = {k: asdict(v) for k, v in self.recon.items()}
+        return d
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "ModelConfig":
+        d = dict(d)
+        d["recon"] = {k: ReconConfig(**v) for k, v in d.get("recon", {}).items()}
+        return cls(**d)
+
+
+def _recon(**over) -> dict:
+    base = {"diffuse": ReconConfig(), "specular": ReconConfig(scales=2, radius=2.0), "alpha": ReconConfig(scales=2),
+            "depth": ReconConfig(scales=2, radius=1.5)}
+    return {k: ReconConfig(**{**asdict(v), **over.get(k, {})}) for k, v in base.items()}
+
+
+CONFIGS = {
+    # trains in hours on 2 CPU cores: 2 U-Nets of 2 levels, 32-wide embeddings, 4 heads of 8
+    "cpu-small": ModelConfig("cpu-small", dim=32, unets=2, levels=2, blocks_per_level=1, heads=4, head_dim=8,
+                             radius=2.5, radius_growth=1.0, recon=_recon()),
+    # the paper's size (GPU training)
+    "paper": ModelConfig("paper", dim=64, unets=3, levels=3, blocks_per_level=2, heads=4, head_dim=16,
+                         radius=3.5, radius_growth=1.0,
+                         recon=_recon(diffuse={"scales": 4, "radius": 3.5}, specular={"scales": 3})),
+}
+
+
+def get_config(name: str) -> ModelConfig:
+    try:
+        return CONFIGS[name]
+    except KeyError:
+        raise ValueError(f"unknown model config {name!r} (known: {', '.join(sorted(CONFIGS))})") from None
