@@ -1,0 +1,74 @@
+"""Input processing (paper Sec. 4.1.1): per-bin features from a deep image in ranad's channel convention.
+
+Transforms suited to each kind of data: radiance-like layers through log1p (HDR range), alpha and coverage as they
+are, depth as log depth standardised per image (scale-free), albedo and normals as they are; then a positional
+encoding of the pixel position (periodic, so tiles are treated alike) and of the bin index within its pixel
+(bins in front-to-back order). The noisy layers the reconstruction denoises are returned alongside.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+
+from ..deep import DeepImage
+from .layers import Layout
+
+RADIANCE_LAYERS = ("diffuse", "specular")   # denoised by their own reconstruction modules
+AUX = {"albedo": ("albedo.R", "albedo.G", "albedo.B"), "normal": ("N.X", "N.Y", "N.Z")}
+PERIODS = (2.0, 4.0, 8.0, 16.0)              # pixel-position encoding
+BIN_FREQS = 3                                # bin-index encoding
+
+
+@dataclass
+class ModelInputs:
+    layout: Layout
+    features: torch.Tensor      # [N, F]
+    layers: dict                # name -> [N, C] noisy values (premultiplied radiance, alpha [N,1], depth [N,1])
+
+    @property
+    def feature_dim(self) -> int:
+        return self.features.shape[1]
+
+
+def feature_dim() -> int:
+    return 2 * 3 + 2 + 1 + 3 + 3 + 4 * len(PERIODS) + 2 * BIN_FREQS + 1
+
+
+def _cols(img: DeepImage, names) -> np.ndarray:
+    return np.stack([img.channel(n) for n in names], 1).astype(np.float32)
+
+
+def _has(img: DeepImage, names) -> bool:
+    return all(n in img.channels for n in names)
+
+
+def prepare(img: DeepImage) -> ModelInputs:
+    """Features and noisy layers of a deep image whose bins are in front-to-back order within each pixel."""
+    n = img.values.shape[0]
+    layers = {}
+    for name in RADIANCE_LAYERS:
+        names = tuple(f"{name}.{c}" for c in "RGB")
+        layers[name] = _cols(img, names) if _has(img, names) else np.zeros((n, 3), np.float32)
+    layers["alpha"] = _cols(img, ["A"])
+    layers["depth"] = _cols(img, ["Z"])
+    cov = _cols(img, ["coverage"]) if "coverage" in img.channels else layers["alpha"]
+    logz = np.log(np.maximum(layers["depth"], 1e-4))
+    zn = (logz - logz.mean()) / (logz.std() + 1e-6) if n else logz
+    aux = [_cols(img, names) if _has(img, names) else np.zeros((n, 3), np.float32) for names in AUX.values()]
+    base = np.concatenate([np.log1p(np.maximum(layers["diffuse"], 0)), np.log1p(np.maximum(layers["specular"], 0)),
+                           layers["alpha"], cov, zn, *aux], axis=1)
+    layout = Layout.of(torch.from_numpy(img.offsets), img.height, img.width)
+    y, x = layout.pixels[:, 0].float(), layout.pixels[:, 1].float()
+    pos = [f(2 * math.pi * t / p) for p in PERIODS for t in (x, y) for f in (torch.sin, torch.cos)]
+    offs = layout.offsets
+    counts = (offs[1:] - offs[:-1])
+    b = (torch.arange(layout.bins) - torch.repeat_interleave(offs[:-1], counts, output_size=layout.bins)).float()
+    nb = torch.repeat_interleave(counts, counts, output_size=layout.bins).float()
+    bins = [f(b * math.pi / 2 ** k) for k in range(BIN_FREQS) for f in (torch.sin, torch.cos)]
+    feats = torch.cat([torch.from_numpy(base), torch.stack(pos, 1), torch.stack(bins, 1),
+                       (b / nb.clamp(min=1)).unsqueeze(1)], dim=1)
+    return ModelInputs(layout, feats, {k: torch.from_numpy(v) for k, v in layers.items()})
