@@ -73,10 +73,12 @@ def cli(ctx: click.Context, io_mode: str, debug: bool) -> None:
 from .cmd_flatten import flatten_cmd  # noqa: E402  (commands import nothing from this module)
 from .cmd_info import info_cmd  # noqa: E402
 from .cmd_synth import synth_cmd  # noqa: E402
+from .cmd_train import train_cmd  # noqa: E402
 
 cli.add_command(info_cmd)
 cli.add_command(flatten_cmd)
 cli.add_command(synth_cmd)
+cli.add_command(train_cmd)
 
 
 def main() -> None:

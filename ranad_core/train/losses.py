@@ -1,0 +1,30 @@
+"""Losses (paper Sec. 5): SMAPE on the bins of each radiance layer, SMAPE on the composited (flattened) colour,
+L1 on alpha and relative L1 on depth."""
+
+from __future__ import annotations
+
+import torch
+
+from ..deep import flatten_torch
+
+WEIGHTS = {"diffuse": 1.0, "specular": 1.0, "composite": 1.0, "alpha": 0.5, "depth": 0.2}
+
+
+def smape(pred: torch.Tensor, target: torch.Tensor, eps: float = 1e-2) -> torch.Tensor:
+    return ((pred - target).abs() / (pred.abs() + target.abs() + eps)).mean()
+
+
+def composite(layers: dict, offsets: torch.Tensor) -> torch.Tensor:
+    """Flattened colour [P, 3] of diffuse + specular (premultiplied) with alpha, front to back."""
+    rgb = layers["diffuse"] + layers["specular"]
+    values = torch.cat([rgb, layers["alpha"]], dim=1)
+    return flatten_torch(values, offsets, 3)[:, :3]
+
+
+def total_loss(pred: dict, ref: dict, offsets: torch.Tensor) -> tuple[torch.Tensor, dict]:
+    parts = {"diffuse": smape(pred["diffuse"], ref["diffuse"]), "specular": smape(pred["specular"], ref["specular"]),
+             "alpha": (pred["alpha"] - ref["alpha"]).abs().mean(),
+             "depth": ((pred["depth"] - ref["depth"]).abs() / (ref["depth"].abs() + 1e-3)).mean()}
+    parts["composite"] = smape(composite(pred, offsets), composite(ref, offsets))
+    loss = sum(WEIGHTS[k] * v for k, v in parts.items())
+    return loss, {k: v.item() for k, v in parts.items()}
