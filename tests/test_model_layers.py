@@ -116,3 +116,14 @@ def test_ranad_on_the_example_shot_learns_toward_the_reference():
         value.backward()
         opt.step()
     assert loss().item() < first
+
+
+def test_layers_with_no_bins_at_a_coarse_scale():
+    """A crop whose bins all drop out at some scale (one bin in one pixel): every module still runs."""
+    lay = Layout.of(torch.tensor([0, 0, 1, 1, 1]), 2, 2)  # only pixel (0, 1) holds a bin
+    torch.manual_seed(0)
+    net = MultiUNet(dim=8, unets=2, levels=2, blocks_per_level=1, heads=4, head_dim=2, radius=1.0, radius_growth=1.0)
+    rec = Reconstruction(dim=8, scales=3, heads=2, head_dim=4, radius=1.0)
+    feat = torch.randn(1, 8)
+    assert net(feat, lay).shape == (1, 8)
+    assert rec(feat, lay, torch.ones(1, 3)).shape == (1, 3)

@@ -80,7 +80,7 @@ class MultiHeadRaNA(nn.Module):
                 keys: Layout) -> torch.Tensor:
         q, k, v = self._heads(self.q(q_feat)), self._heads(self.k(kv_feat)), self._heads(self.v(kv_feat))
         y = rana(q, k, v, q_pixels, keys.offsets, keys.size, self.radius, self.bias, backend=self.backend)
-        return self.out(y.reshape(y.shape[0], -1))
+        return self.out(y.reshape(y.shape[0], self.heads * self.head_dim))
 
 
 class RaNABlock(nn.Module):

@@ -34,8 +34,8 @@ class KernelAttention(nn.Module):
     def forward(self, q_feat, k_feat, q_pixels, keys: Layout, values: torch.Tensor) -> torch.Tensor:
         """values [Nk, C] -> [Nq, C]: each head's kernel applied to all C value channels, heads mixed convexly."""
         H, d = self.heads, self.head_dim
-        q = self.q(q_feat).view(-1, d, H).transpose(1, 2)
-        k = self.k(k_feat).view(-1, d, H).transpose(1, 2)
+        q = self.q(q_feat).view(q_feat.shape[0], d, H).transpose(1, 2)
+        k = self.k(k_feat).view(k_feat.shape[0], d, H).transpose(1, 2)
         v = values.unsqueeze(1).expand(-1, H, -1)
         y = rana(q, k, v, q_pixels, keys.offsets, keys.size, self.radius, self.bias, backend=self.backend)
         return (y * torch.softmax(self.head_mix, 0)[None, :, None]).sum(1)
