@@ -80,6 +80,8 @@ def make_one(cfg: SynthConfig, index: int) -> dict:
         os.makedirs(os.path.join(root, kind_name), exist_ok=True)
     for frame in range(cfg.frames):
         fs = load_frame(spec, frame)
+        if frame == centre:
+            centre_scene = fs  # the reference traces the same loaded frame
         for spp in cfg.spp:
             samples = noisy_samples(spec, frame, spp, sseed + 7919 * frame + spp, fs)
             for kind_name in cfg.kinds:
@@ -92,7 +94,7 @@ def make_one(cfg: SynthConfig, index: int) -> dict:
                 if frame == centre:
                     centre_layouts.append((kind_name, spp, lay))
     refs = render_reference(spec, centre, cfg.ref_spp, [lay for _, _, lay in centre_layouts], sseed + 104729,
-                            load_frame(spec, centre))
+                            centre_scene)
     for kind_name in cfg.kinds:
         stats[kind_name] = {"bins_per_covered_pixel": float(np.mean(bins_per_px[kind_name])),
                             "reference_unbinned_energy": {}}
