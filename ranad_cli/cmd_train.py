@@ -16,11 +16,15 @@ from tqdm import tqdm
 @click.option("--lr", default=1e-3, show_default=True, type=float, help="Peak learning rate (AdamW).")
 @click.option("--seed", default=0, show_default=True, type=int, help="Seed of the crops and the initialisation.")
 @click.option("--checkpoint-every", default=200, show_default=True, type=click.IntRange(1))
-def train_cmd(dataset, run, config, steps, crop, lr, seed, checkpoint_every):
+@click.option("--processes", default=1, show_default=True, type=click.IntRange(1),
+              help="Data-parallel processes on this machine (DDP over gloo; one crop per process per step). For "
+                   "several machines, start `torchrun ... -m ranad_cli train ...` instead.")
+def train_cmd(dataset, run, config, steps, crop, lr, seed, checkpoint_every, processes):
     """Train on DATASET (the output of `ranad synth`): centre-frame pairs, random crops, flips and transposes,
-    SMAPE on the diffuse and specular bins and on the composited colour, L1 on alpha and depth."""
+    SMAPE on the diffuse and specular bins and on the composited colour plus SSIM on it, L1 on alpha and depth.
+    Resumes from RUN/checkpoint.pt when it exists."""
     from ranad_core.model import get_config
-    from ranad_core.train.trainer import TrainConfig, train
+    from ranad_core.train.trainer import TrainConfig, spawn_local, train
 
     try:
         get_config(config)
@@ -28,6 +32,10 @@ def train_cmd(dataset, run, config, steps, crop, lr, seed, checkpoint_every):
         raise click.BadParameter(str(e), param_hint="--config") from None
     cfg = TrainConfig(dataset=dataset, run=run, config=config, steps=steps, crop=crop, lr=lr, seed=seed,
                       checkpoint_every=checkpoint_every)
+    if processes > 1:
+        spawn_local(cfg, processes)
+        click.echo(f"done: {steps} steps x {processes} processes, log in {run}/train.log")
+        return
     with tqdm(total=steps, desc="train", unit="step") as bar:
         parts = train(cfg, bar.update)
     click.echo("done: " + " ".join(f"{k} {v:.4f}" for k, v in parts.items()))

@@ -1,5 +1,11 @@
 """The training loop: AdamW, linear warm-up then staged decay, gradient clipping, atomic checkpoints and resume,
-and a readable log (one line per `log_every` steps, also appended to RUN/train.log)."""
+and a readable log (one line per `log_every` steps, appended to RUN/train.log).
+
+Data parallel training goes through torch.distributed (DDP on the gloo backend, which runs on CPUs): every
+process samples its own crops (its own random stream), gradients are averaged, so one step consumes one crop per
+process. Processes come either from `torchrun` (several machines; the usual RANK/WORLD_SIZE/MASTER_ADDR
+environment) or from `spawn_local` (several processes on this machine). Only rank 0 writes the checkpoint and
+the log."""
 
 from __future__ import annotations
 
@@ -50,13 +56,18 @@ def save_checkpoint(path: str, model, opt, step: int, cfg: TrainConfig, rng: np.
 
 
 def train(cfg: TrainConfig, progress=None) -> dict:
-    """Trains (or resumes) into cfg.run; returns the last step's loss parts."""
+    """Trains (or resumes) into cfg.run; returns the last step's loss parts. Joins the process group when
+    torch.distributed is initialised (see `spawn_local`, or torchrun's environment)."""
+    dist = torch.distributed
+    if not dist.is_initialized() and int(os.environ.get("WORLD_SIZE", "1")) > 1:
+        dist.init_process_group("gloo")
+    rank, world = (dist.get_rank(), dist.get_world_size()) if dist.is_initialized() else (0, 1)
     pairs = find_pairs(cfg.dataset)
     os.makedirs(cfg.run, exist_ok=True)
     torch.manual_seed(cfg.seed)
     model = RaNAD(get_config(cfg.config), feature_dim())
     opt = torch.optim.AdamW(model.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay)
-    rng = np.random.default_rng(cfg.seed)
+    rng = np.random.default_rng(cfg.seed if world == 1 else [cfg.seed, rank])
     step = 0
     ckpt = os.path.join(cfg.run, CHECKPOINT)
     if os.path.isfile(ckpt):
@@ -65,9 +76,13 @@ def train(cfg: TrainConfig, progress=None) -> dict:
             raise RanadError(f"checkpoint is for config {state['model_config']['name']!r}, not {cfg.config!r}", ckpt)
         model.load_state_dict(state["model"])
         opt.load_state_dict(state["optimizer"])
-        rng.bit_generator.state = state["rng"]
         step = state["step"]
-    log = open(os.path.join(cfg.run, "train.log"), "a")
+        if rank == 0:
+            rng.bit_generator.state = state["rng"]
+        else:  # other ranks' streams are not saved: a fresh stream per (seed, rank, resume step)
+            rng = np.random.default_rng([cfg.seed, rank, step])
+    net = torch.nn.parallel.DistributedDataParallel(model, find_unused_parameters=True) if world > 1 else model
+    log = open(os.path.join(cfg.run, "train.log"), "a") if rank == 0 else None
     parts = {}
     t0 = time.perf_counter()
     while step < cfg.steps:
@@ -78,22 +93,55 @@ def train(cfg: TrainConfig, progress=None) -> dict:
             continue
         for g in opt.param_groups:
             g["lr"] = learning_rate(cfg, step)
-        pred = model(noisy)
-        loss, parts = total_loss(pred, ref.layers, noisy.layout.offsets)
+        pred = net(noisy)
+        loss, parts = total_loss(pred, ref.layers, noisy.layout.offsets, noisy.layout.size)
         opt.zero_grad()
         loss.backward()
         torch.nn.utils.clip_grad_norm_(model.parameters(), cfg.clip)
         opt.step()
         step += 1
-        if step % cfg.log_every == 0 or step == cfg.steps:
+        if log and (step % cfg.log_every == 0 or step == cfg.steps):
             secs = (time.perf_counter() - t0) / cfg.log_every
             t0 = time.perf_counter()
             line = (f"step {step} loss {loss.item():.4f} " + " ".join(f"{k} {v:.4f}" for k, v in parts.items())
                     + f" lr {learning_rate(cfg, step - 1):.2e} {secs:.2f} s/step")
             print(line, file=log, flush=True)
-        if step % cfg.checkpoint_every == 0 or step == cfg.steps:
+        if rank == 0 and (step % cfg.checkpoint_every == 0 or step == cfg.steps):
             save_checkpoint(ckpt, model, opt, step, cfg, rng)
         if progress:
             progress(1)
-    log.close()
+    if log:
+        log.close()
     return parts
+
+
+def _free_port() -> int:
+    import socket
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def _worker(rank: int, world: int, port: int, cfg: TrainConfig, threads: int, show_progress: bool) -> None:
+    torch.set_num_threads(threads)
+    torch.distributed.init_process_group("gloo", init_method=f"tcp://127.0.0.1:{port}", rank=rank,
+                                         world_size=world)
+    try:
+        if rank == 0 and show_progress:
+            from tqdm import tqdm
+
+            with tqdm(total=cfg.steps, desc=f"train x{world}", unit="step") as bar:
+                train(cfg, bar.update)
+        else:
+            train(cfg)
+    finally:
+        torch.distributed.destroy_process_group()
+
+
+def spawn_local(cfg: TrainConfig, processes: int, show_progress: bool = True) -> None:
+    """Data-parallel training in `processes` local processes (gloo), the machine's threads shared among them."""
+    import torch.multiprocessing as mp
+
+    threads = max(1, torch.get_num_threads() // processes)
+    mp.spawn(_worker, args=(processes, _free_port(), cfg, threads, show_progress), nprocs=processes, join=True)
