@@ -9,15 +9,7 @@ from tqdm import tqdm
 
 from ranad_core.errors import RanadError
 
-
-def _int_list(text: str) -> tuple:
-    try:
-        vals = tuple(int(x) for x in text.split(",") if x.strip())
-    except ValueError:
-        raise click.BadParameter(f"expected comma-separated integers, got {text!r}") from None
-    if not vals or min(vals) < 1:
-        raise click.BadParameter("sample counts must be positive")
-    return vals
+from .params import int_list as _int_list
 
 
 @click.command("synth")

@@ -283,6 +283,13 @@ class DeepImage:
         np.cumsum(counts, out=offsets[1:])
         return gather_bins(self, _ranges(self.offsets[:-1][src], counts), offsets, data_window=(x0, y0, x1, y1))
 
+    def keep(self, mask: np.ndarray) -> "DeepImage":
+        """Only the bins where ``mask`` [N] is true (order kept): holdouts, depth slices, object selections."""
+        mask = np.asarray(mask, dtype=bool)
+        kept = np.concatenate([[0], np.cumsum(mask, dtype=np.int64)])
+        offsets = kept[self.offsets]
+        return gather_bins(self, np.flatnonzero(mask), offsets)
+
     def merge(self, other: "DeepImage") -> "DeepImage":
         """Per-pixel concatenation with ``other``; see the module-level :func:`merge`."""
         return merge(self, other)

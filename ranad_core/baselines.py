@@ -1,0 +1,71 @@
+"""What studios use today, measured against in `ranad eval` (DESIGN.md, "Baselines"):
+
+- flat OIDN: flatten the noisy deep image (with its albedo and normal) and denoise it with Intel Open Image
+  Denoise (pyoidn). Best flat quality, but the deep layout is gone.
+- OIDN then recolour (Nuke's DeepRecolor, Arnold's documented workflow): every bin of a pixel gets the flat
+  denoised colour in proportion to its share of that pixel's composited colour, so the deep image flattens to
+  exactly the OIDN image while foreground and background share one flat correction (FG leaks into BG).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import torch
+
+from .deep import DeepImage, flatten_torch, unsort
+from .errors import RanadError
+
+RGB = ("R", "G", "B")
+EPS = 1e-6
+
+
+def _composite(img: DeepImage, names, premultiplied: bool) -> np.ndarray:
+    """[P, len(names)] front-to-back composite of sorted `img`; unpremultiplied channels (albedo, normal) are
+    weighted by each bin's visible coverage T_i a_i and normalised by the pixel's alpha."""
+    a = img.channel("A")[:, None]
+    cols = np.stack([img.channel(n) for n in names], 1)
+    vals = cols if premultiplied else cols * a
+    out = flatten_torch(torch.from_numpy(np.concatenate([vals, a], 1)), torch.from_numpy(img.offsets),
+                        len(names)).numpy()
+    if premultiplied:
+        return out[:, :-1]
+    return out[:, :-1] / np.maximum(out[:, -1:], EPS)
+
+
+def oidn_flat(noisy: DeepImage) -> np.ndarray:
+    """[H, W, 3]: the flattened noisy beauty denoised by OIDN (HDR), with flattened albedo and normal when the
+    file has them."""
+    try:
+        import pyoidn
+    except ImportError as e:
+        raise RanadError("the OIDN baseline needs pyoidn (pip install 'ranad[eval]')", "pyoidn") from e
+    srt, _ = noisy.sorted()
+    h, w = noisy.height, noisy.width
+    shape = lambda x: np.ascontiguousarray(x.reshape(h, w, 3), np.float32)  # noqa: E731
+    colour = shape(np.maximum(_composite(srt, RGB, True), 0))
+    aux = {}
+    if all(c in noisy.channels for c in ("albedo.R", "albedo.G", "albedo.B")):
+        aux["albedo"] = shape(np.clip(_composite(srt, ["albedo.R", "albedo.G", "albedo.B"], False), 0, 1))
+        if all(c in noisy.channels for c in ("N.X", "N.Y", "N.Z")):
+            aux["normal"] = shape(np.clip(_composite(srt, ["N.X", "N.Y", "N.Z"], False), -1, 1))
+    return np.asarray(pyoidn.denoise(colour, hdr=True, **aux), np.float32)
+
+
+def recolour(noisy: DeepImage, flat: np.ndarray) -> DeepImage:
+    """`noisy` with its bins' R, G, B rescaled so that the pixel composites to `flat` [H, W, 3]: each bin keeps
+    its share of the noisy composite (gain flat / noisy-composite per pixel and channel); where the noisy
+    composite is black the colour is spread by visible coverage instead."""
+    srt, perm = noisy.sorted()
+    cols = [srt.channels.index(c) for c in RGB]
+    target = flat.reshape(-1, 3).astype(np.float64)
+    comp = _composite(srt, RGB, True).astype(np.float64)
+    alpha_flat = _composite(srt, ["A"], True)[:, 0].astype(np.float64)
+    pix = srt.pixel_index()
+    vals = srt.values.copy()
+    a = srt.channel("A").astype(np.float64)
+    for j, c in enumerate(cols):
+        f, d = comp[pix, j], target[pix, j]
+        by_share = vals[:, c] * np.divide(d, f, out=np.zeros_like(d), where=np.abs(f) > EPS)
+        by_alpha = d * np.divide(a, alpha_flat[pix], out=np.zeros_like(a), where=alpha_flat[pix] > EPS)
+        vals[:, c] = np.where(np.abs(f) > EPS, by_share, by_alpha)
+    return noisy.with_values(unsort(vals, perm))

@@ -1,0 +1,142 @@
+"""`ranad eval`: a model against the baselines on a held-out `ranad synth` set (centre frames).
+
+Per scene, bin kind (deep-Z / deep-OID) and spp, every method gets the flat scores of its flattened beauty
+against the flattened reference (SMAPE, DSSIM, HDR-FLIP) and, when it keeps the deep layout, the deep scores
+(per-bin SMAPE, the compositing edit and the depth separation; see metrics.py). Methods: the noisy input, flat
+OIDN, OIDN then recolour, and ranad. The summary averages over scenes per spp; a PNG grid shows the flattened
+images and the compositing edit side by side.
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from . import metrics
+from .baselines import oidn_flat, recolour
+from .denoise import denoise_frame
+from .exr import read_deep
+from .train.data import find_pairs
+
+METHODS = ("noisy", "oidn", "recolour", "ranad")
+FLAT = ("smape", "dssim", "flip")
+DEEP = ("bin_smape", "z_rel", "comp_flip", "comp_smape", "sep_flip", "sep_smape")
+COLUMNS = ("scene", "kind", "spp", "method", *FLAT, *DEEP, "seconds")
+
+
+@dataclass
+class Result:
+    rows: list = field(default_factory=list)        # one dict per (scene, kind, spp, method), COLUMNS keys
+    grid: list = field(default_factory=list)        # per pair shown: (label, [H, W, 3] images per column)
+    grid_columns: tuple = ("noisy", "oidn", "recolour", "ranad", "reference", "edit: recolour", "edit: ranad",
+                           "edit: reference")
+
+
+def evaluate(dataset: str, model, spps=None, kinds=None, max_scenes: int | None = None, grid_pairs: int = 4,
+             progress=None) -> Result:
+    """Scores every selected pair; `model` is a RaNAD in eval mode."""
+    pairs = [p for p in find_pairs(dataset) if (not spps or p.spp in spps) and (not kinds or p.kind in kinds)]
+    if max_scenes:
+        keep = sorted({p.scene for p in pairs})[:max_scenes]
+        pairs = [p for p in pairs if p.scene in keep]
+    result = Result()
+    for pair in pairs:
+        noisy, ref = read_deep(pair.noisy), read_deep(pair.reference)
+        z = metrics.split_depth(ref)
+        flat_ref = metrics.flat_rgb(ref)
+        outputs, seconds = {}, {}
+        t = time.perf_counter()
+        outputs["oidn"] = oidn_flat(noisy)
+        seconds["oidn"] = time.perf_counter() - t
+        t = time.perf_counter()
+        outputs["recolour"] = recolour(noisy, outputs["oidn"])
+        seconds["recolour"] = time.perf_counter() - t + seconds["oidn"]
+        t = time.perf_counter()
+        outputs["ranad"] = denoise_frame(model, noisy)
+        seconds["ranad"] = time.perf_counter() - t
+        outputs["noisy"], seconds["noisy"] = noisy, 0.0
+        flats = {}
+        for method in METHODS:
+            out = outputs[method]
+            deep = not isinstance(out, np.ndarray)
+            flats[method] = metrics.flat_rgb(out) if deep else out
+            row = {"scene": pair.scene, "kind": pair.kind, "spp": pair.spp, "method": method,
+                   **metrics.flat_scores(flat_ref, flats[method]),
+                   **(metrics.deep_scores(ref, out, z) if deep else dict.fromkeys(DEEP, math.nan)),
+                   "seconds": seconds[method]}
+            result.rows.append(row)
+        if len(result.grid) < grid_pairs:
+            edits = [metrics.composite_edit(metrics.with_depths_of(x, ref), z)
+                     for x in (outputs["recolour"], outputs["ranad"], ref)]
+            result.grid.append((f"{pair.scene} {pair.kind} {pair.spp} spp",
+                                [flats[m] for m in METHODS] + [flat_ref] + edits))
+        if progress:
+            progress(1)
+    return result
+
+
+def count_pairs(dataset: str, spps=None, kinds=None, max_scenes: int | None = None) -> int:
+    pairs = [p for p in find_pairs(dataset) if (not spps or p.spp in spps) and (not kinds or p.kind in kinds)]
+    scenes = sorted({p.scene for p in pairs})[:max_scenes] if max_scenes else None
+    return sum(1 for p in pairs if scenes is None or p.scene in scenes)
+
+
+def summary(rows: list) -> list:
+    """Means over scenes and kinds per (spp, method), methods in METHODS order."""
+    out = []
+    for spp in sorted({r["spp"] for r in rows}):
+        for method in METHODS:
+            sel = [r for r in rows if r["spp"] == spp and r["method"] == method]
+            if not sel:
+                continue
+            agg = {"spp": spp, "method": method, "n": len(sel)}
+            for k in (*FLAT, *DEEP, "seconds"):
+                vals = [r[k] for r in sel if not math.isnan(r[k])]
+                agg[k] = float(np.mean(vals)) if vals else math.nan
+            out.append(agg)
+    return out
+
+
+def _fmt(v) -> str:
+    if isinstance(v, float):
+        return "n/a" if math.isnan(v) else f"{v:.4f}"
+    return str(v)
+
+
+def markdown(rows: list, title: str = "") -> str:
+    """The summary table in Markdown (lower is better everywhere; n/a: the method has no deep output)."""
+    s = summary(rows)
+    cols = ("spp", "method", "n", "flip", "smape", "dssim", "bin_smape", "z_rel", "comp_flip", "comp_smape",
+            "sep_flip", "sep_smape", "seconds")
+    lines = ([f"### {title}", ""] if title else []) + ["| " + " | ".join(cols) + " |",
+                                                      "|" + "---|" * len(cols)]
+    lines += ["| " + " | ".join(_fmt(r[c]) for c in cols) + " |" for r in s]
+    return "\n".join(lines) + "\n"
+
+
+def write_csv(rows: list, path: str) -> None:
+    from .fileutil import atomic_output
+
+    with atomic_output(path) as tmp, open(tmp, "w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=COLUMNS)
+        w.writeheader()
+        for r in rows:
+            w.writerow({k: (f"{v:.6g}" if isinstance(v, float) else v) for k, v in r.items()})
+
+
+def grid_image(result: Result, pad: int = 2) -> np.ndarray:
+    """[H, W, 3] linear image: one row per shown pair, one column per entry of `grid_columns`."""
+    if not result.grid:
+        return np.zeros((1, 1, 3), np.float32)
+    h = max(imgs[0].shape[0] for _, imgs in result.grid)
+    w = max(imgs[0].shape[1] for _, imgs in result.grid)
+    n = len(result.grid_columns)
+    out = np.zeros((len(result.grid) * (h + pad), n * (w + pad), 3), np.float32)
+    for r, (_, imgs) in enumerate(result.grid):
+        for c, img in enumerate(imgs):
+            out[r * (h + pad): r * (h + pad) + img.shape[0], c * (w + pad): c * (w + pad) + img.shape[1]] = img
+    return out

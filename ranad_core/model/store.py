@@ -1,0 +1,99 @@
+"""Loading and saving model weights: shipped models by name, safetensors files, training checkpoints.
+
+A shipped model is `ranad_core/weights/<name>.safetensors` with a model card `<name>.md` beside it. The
+safetensors metadata holds the architecture (`model_config`, JSON) and provenance (training step, data recipe),
+so a file always loads into the architecture it was trained with. A model's id is its name plus the first 12 hex
+digits of the file's SHA-256: caches and eval tables record it, so results name the exact weights.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+import torch
+
+from ..errors import RanadError
+from ..fileutil import atomic_output
+from .config import ModelConfig
+from .inputs import feature_dim
+from .ranad import RaNAD
+
+WEIGHTS_DIR = Path(__file__).resolve().parents[1] / "weights"
+DEFAULT_MODEL = "cpu-small-v1"
+
+
+@dataclass
+class LoadedModel:
+    model: RaNAD
+    model_id: str
+    metadata: dict
+
+
+def shipped_models() -> list[str]:
+    return sorted(p.stem for p in WEIGHTS_DIR.glob("*.safetensors"))
+
+
+def _digest(path: Path) -> str:
+    return hashlib.sha256(path.read_bytes()).hexdigest()[:12]
+
+
+def resolve(spec: str | None) -> Path:
+    """A model name (shipped), a .safetensors file or a training checkpoint (.pt) -> its path."""
+    spec = spec or DEFAULT_MODEL
+    path = Path(spec)
+    if path.is_dir() and (path / "checkpoint.pt").is_file():
+        return path / "checkpoint.pt"
+    if path.is_file():
+        return path
+    shipped = WEIGHTS_DIR / f"{spec}.safetensors"
+    if shipped.is_file():
+        return shipped
+    known = ", ".join(shipped_models()) or "none shipped"
+    raise RanadError(f"no such model (shipped: {known}; or give a .safetensors file or a training run)", spec)
+
+
+def load_model(spec: str | None = None, backend: str = "auto") -> LoadedModel:
+    """The model in eval mode, with its id and metadata."""
+    path = resolve(spec)
+    try:
+        if path.suffix == ".safetensors":
+            from safetensors import safe_open
+            from safetensors.torch import load_file
+
+            with safe_open(str(path), framework="pt") as f:
+                meta = dict(f.metadata() or {})
+            state = load_file(str(path))
+            config = ModelConfig.from_dict(json.loads(meta["model_config"]))
+        else:
+            ckpt = torch.load(path, map_location="cpu", weights_only=False)
+            state, config = ckpt["model"], ModelConfig.from_dict(ckpt["model_config"])
+            meta = {"step": str(ckpt.get("step")), "model_config": json.dumps(ckpt["model_config"])}
+    except RanadError:
+        raise
+    except Exception as e:  # corrupt or foreign files: one line naming the file
+        raise RanadError(f"not a ranad model ({type(e).__name__}: {e})", path) from None
+    model = RaNAD(config, feature_dim(), backend=backend)
+    try:
+        model.load_state_dict(state)
+    except RuntimeError as e:
+        raise RanadError(f"weights do not fit config {config.name!r}: {str(e).splitlines()[0]}", path) from None
+    model.eval()
+    name = path.stem if path.suffix == ".safetensors" else path.parent.name
+    return LoadedModel(model, f"{name}@{_digest(path)}", meta)
+
+
+def export_weights(checkpoint: str | Path, out: str | Path, extra: dict | None = None) -> Path:
+    """Write a training checkpoint's model weights as safetensors with the config and provenance metadata."""
+    from safetensors.torch import save_file
+
+    ckpt = torch.load(resolve(str(checkpoint)), map_location="cpu", weights_only=False)
+    meta = {"model_config": json.dumps(ckpt["model_config"]), "step": str(ckpt["step"]),
+            "train_config": json.dumps(ckpt.get("train_config", {}))}
+    meta.update({k: str(v) for k, v in (extra or {}).items()})
+    state = {k: v.contiguous() for k, v in ckpt["model"].items()}
+    with atomic_output(out) as tmp:
+        save_file(state, tmp, metadata=meta)
+    return Path(out)

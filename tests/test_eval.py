@@ -1,0 +1,126 @@
+"""Evaluation: metrics behave (zero on identical inputs, edits do what they say), the baselines keep their
+promises (recolour flattens to the flat image it was given), weights round-trip, `ranad eval` makes its table."""
+
+from __future__ import annotations
+
+import csv
+import math
+
+import numpy as np
+import pytest
+import torch
+from click.testing import CliRunner
+
+pytest.importorskip("pyoidn", reason="the OIDN baseline needs pyoidn (pip install 'ranad[eval]')")
+pytest.importorskip("flip_evaluator", reason="HDR-FLIP needs flip-evaluator (pip install 'ranad[eval]')")
+
+from deep_factory import random_deep
+from ranad_cli.main import cli
+from ranad_core import metrics
+from ranad_core.baselines import recolour
+from ranad_core.denoise import denoise_frame
+from ranad_core.exr import read_deep
+from ranad_core.model import RaNAD, feature_dim, get_config
+from ranad_core.model.store import export_weights, load_model
+from test_train import SHOT, dataset_from_example
+
+
+def untrained_run(tmp_path):
+    torch.manual_seed(0)
+    model = RaNAD(get_config("cpu-small"), feature_dim())
+    run = tmp_path / "run"
+    run.mkdir()
+    torch.save({"model": model.state_dict(), "model_config": model.config.to_dict(), "step": 0}, run / "checkpoint.pt")
+    return run
+
+
+def beauty_image(seed=0):
+    img = random_deep(24, 20, max_bins=4, seed=seed, ids=(), channels=("R", "G", "B", "A", "Z"))
+    vals = img.values.copy()
+    vals[:, 3] = np.clip(vals[:, 3] / 4, 0.05, 1)
+    vals[:, :3] *= vals[:, 3:4]                      # premultiplied colour
+    return img.with_values(vals)
+
+
+def test_metrics_are_zero_on_identical_images_and_grow_with_noise():
+    img = beauty_image()
+    flat = metrics.flat_rgb(img)
+    assert metrics.flat_scores(flat, flat) == {"smape": 0.0, "dssim": pytest.approx(0, abs=1e-6), "flip": 0.0}
+    deep = metrics.deep_scores(img, img)
+    assert all(v == pytest.approx(0, abs=1e-6) for v in deep.values())
+    rng = np.random.default_rng(1)
+    noisy = img.with_values(img.values * rng.uniform(0.5, 1.5, img.values.shape).astype(np.float32))
+    worse = img.with_values(img.values * rng.uniform(0.1, 1.9, img.values.shape).astype(np.float32))
+    s1, s2 = metrics.flat_scores(flat, metrics.flat_rgb(noisy)), metrics.flat_scores(flat, metrics.flat_rgb(worse))
+    assert 0 < s1["flip"] < s2["flip"] and 0 < s1["smape"] < s2["smape"] and 0 < s1["dssim"] < s2["dssim"]
+
+
+def test_edits_recolour_the_front_and_insert_a_layer():
+    img = beauty_image()
+    z = metrics.split_depth(img)
+    front, back = metrics.depth_slices(img, z)
+    zc = img.channel("Z")
+    assert img.keep(zc < z).num_bins + img.keep(zc >= z).num_bins == img.num_bins
+    edit = metrics.composite_edit(img, z)
+    # a pixel with no bins shows only the inserted layer
+    empty = int(np.flatnonzero(img.counts == 0)[0])
+    np.testing.assert_allclose(edit.reshape(-1, 3)[empty], metrics.INSERT_COLOUR, rtol=1e-6)
+    # all-background pixels: the layer over the background; all-foreground: recoloured front over the layer
+    assert not np.allclose(front + back, metrics.flat_rgb(img))  # slices are not a split of the flat image
+
+
+def test_recolour_flattens_to_the_given_image_and_keeps_the_layout():
+    img = beauty_image(3)
+    target = metrics.flat_rgb(img) * np.float32(0.5) + np.float32(0.01)
+    out = recolour(img, target)
+    np.testing.assert_array_equal(out.offsets, img.offsets)
+    covered = (img.counts > 0).reshape(img.height, img.width)
+    np.testing.assert_allclose(metrics.flat_rgb(out)[covered], target[covered], rtol=2e-4, atol=1e-5)
+
+
+def test_weights_round_trip_and_denoise_keeps_the_layout(tmp_path):
+    run = untrained_run(tmp_path)
+    path = export_weights(run, tmp_path / "m.safetensors", {"data": "test"})
+    a, b = load_model(str(run)), load_model(str(path))
+    assert b.metadata["data"] == "test" and b.model_id.startswith("m@")
+    img = read_deep(SHOT / "noisy_spp16.0001.exr")
+    out_a, out_b = denoise_frame(a.model, img), denoise_frame(b.model, img)
+    np.testing.assert_array_equal(out_a.values, out_b.values)
+    np.testing.assert_array_equal(out_a.offsets, img.offsets)
+    np.testing.assert_array_equal(out_a.ids["id"], img.ids["id"])
+    assert out_a.channels == img.channels and out_a.header == img.header
+    alpha = out_a.channel("A")
+    assert alpha.min() >= 0 and alpha.max() <= 1 and np.isfinite(out_a.values).all()
+    ch = img.channels
+    rgb = sum(out_a.values[:, [ch.index(f"{l}.{c}") for c in "RGB"]] for l in ("diffuse", "specular", "emission"))
+    np.testing.assert_allclose(out_a.values[:, [ch.index(c) for c in "RGB"]], rgb, rtol=1e-5, atol=1e-6)
+    untouched = [c for c in ch if c.split(".")[0] in ("albedo", "N", "emission", "lg_key", "coverage")]
+    np.testing.assert_array_equal(out_a.select(untouched).values, img.select(untouched).values)
+
+
+def test_bad_model_files_are_refused(tmp_path):
+    from ranad_core.errors import RanadError
+
+    bad = tmp_path / "bad.safetensors"
+    bad.write_bytes(b"not weights")
+    with pytest.raises(RanadError, match="not a ranad model"):
+        load_model(str(bad))
+    with pytest.raises(RanadError, match="no such model"):
+        load_model("no-such-model")
+
+
+def test_eval_command_writes_table_csv_and_grid(tmp_path):
+    ds = dataset_from_example(tmp_path / "ds")
+    run = untrained_run(tmp_path)
+    out = tmp_path / "ev"
+    r = CliRunner().invoke(cli, ["eval", str(ds), "-o", str(out), "--model", str(run), "--grid", "1"])
+    assert r.exit_code == 0, r.output
+    assert "| 16 | ranad | 1 |" in r.output and "| 16 | oidn | 1 |" in r.output
+    rows = list(csv.DictReader(open(out / "eval.csv")))
+    assert [row["method"] for row in rows] == ["noisy", "oidn", "recolour", "ranad"]
+    noisy, oidn = rows[0], rows[1]
+    assert float(oidn["flip"]) < float(noisy["flip"])          # OIDN really denoised
+    assert math.isnan(float(oidn["comp_flip"])) and float(noisy["comp_flip"]) > 0
+    assert (out / "grid.png").stat().st_size > 1000 and (out / "eval.md").is_file()
+    r = CliRunner().invoke(cli, ["eval", str(ds), "-o", str(out), "--model", str(run), "--spp", "7"])
+    assert r.exit_code == 2 and "no pairs match" in r.output
