@@ -19,7 +19,11 @@ from tqdm import tqdm
 @click.option("--processes", default=1, show_default=True, type=click.IntRange(1),
               help="Data-parallel processes on this machine (DDP over gloo; one crop per process per step). For "
                    "several machines, start `torchrun ... -m ranad_cli train ...` instead.")
-def train_cmd(dataset, run, config, steps, crop, lr, seed, checkpoint_every, processes):
+@click.option("--p-no-aux", default=0.2, show_default=True, type=click.FloatRange(0, 1),
+              help="Share of crops shown without albedo/normal, so the model serves files that lack them.")
+@click.option("--p-no-split", default=0.2, show_default=True, type=click.FloatRange(0, 1),
+              help="Share of crops shown without the diffuse/specular split (beauty only).")
+def train_cmd(dataset, run, config, steps, crop, lr, seed, checkpoint_every, processes, p_no_aux, p_no_split):
     """Train on DATASET (the output of `ranad synth`): centre-frame pairs, random crops, flips and transposes,
     SMAPE on the diffuse and specular bins and on the composited colour plus SSIM on it, L1 on alpha and depth.
     Resumes from RUN/checkpoint.pt when it exists."""
@@ -31,7 +35,7 @@ def train_cmd(dataset, run, config, steps, crop, lr, seed, checkpoint_every, pro
     except ValueError as e:
         raise click.BadParameter(str(e), param_hint="--config") from None
     cfg = TrainConfig(dataset=dataset, run=run, config=config, steps=steps, crop=crop, lr=lr, seed=seed,
-                      checkpoint_every=checkpoint_every)
+                      checkpoint_every=checkpoint_every, p_no_aux=p_no_aux, p_no_split=p_no_split)
     if processes > 1:
         spawn_local(cfg, processes)
         click.echo(f"done: {steps} steps x {processes} processes, log in {run}/train.log")

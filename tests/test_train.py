@@ -104,3 +104,20 @@ def test_data_parallel_training_averages_over_processes(tmp_path):
     assert (tmp_path / "ddp" / "train.log").read_text().count("step 2 loss") == 1
     diff = max((a["model"][k] - b["model"][k]).abs().max().item() for k in a["model"])
     assert diff > 1e-6
+
+
+def test_reduced_modes_keep_the_radiance():
+    from ranad_core.model import prepare
+    from ranad_core.train.data import reduce_inputs
+
+
+    noisy = read_deep(SHOT / "noisy_spp16.0001.exr")
+    ref = read_deep(SHOT / "reference_spp16.0001.exr")
+    n2, r2 = reduce_inputs(noisy, ref, np.random.default_rng(0), 1.0, 1.0)
+    assert not any(c.startswith(("albedo.", "N.", "specular.")) for c in n2.channels)
+    assert not any(c.startswith("specular.") for c in r2.channels)
+    full, red = prepare(noisy.sorted()[0]), prepare(n2.sorted()[0])
+    np.testing.assert_allclose(red.layers["diffuse"], full.layers["diffuse"] + full.layers["specular"], rtol=1e-6)
+    assert float(red.layers["specular"].abs().max()) == 0
+    n3, r3 = reduce_inputs(noisy, ref, np.random.default_rng(0), 0.0, 0.0)
+    assert n3 is noisy and r3 is ref

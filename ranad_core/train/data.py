@@ -92,3 +92,35 @@ def sample(pair: Pair, rng: np.random.Generator, crop: int) -> tuple:
     win = (x0, y0, x0 + cw - 1, y0 + ch - 1)
     fx, fy, tr = (bool(b) for b in rng.integers(0, 2, 3))
     return transform(noisy.crop(win), fx, fy, tr), transform(ref.crop(win), fx, fy, tr)
+
+
+AUX_LAYERS = ("albedo", "N")
+SPLIT_LAYERS = ("diffuse", "specular")
+
+
+def without_aux(img: DeepImage) -> DeepImage:
+    """The image without albedo and normal channels (what many renderers' deep outputs lack)."""
+    return img.select([c for c in img.channels if c.split(".")[0] not in AUX_LAYERS])
+
+
+def merged_split(img: DeepImage) -> DeepImage:
+    """diffuse := diffuse + specular, specular channels removed: a file without the split, as the model sees it
+    (the whole radiance goes through the diffuse reconstruction)."""
+    if not all(f"{layer}.{c}" in img.channels for layer in SPLIT_LAYERS for c in "RGB"):
+        return img
+    vals = img.values.copy()
+    for c in "RGB":
+        vals[:, img.channels.index(f"diffuse.{c}")] += img.channel(f"specular.{c}")
+    keep = [c for c in img.channels if c.split(".")[0] != "specular"]
+    return img.with_values(vals).select(keep)
+
+
+def reduce_inputs(noisy: DeepImage, ref: DeepImage, rng: np.random.Generator, p_no_aux: float,
+                  p_no_split: float) -> tuple:
+    """Randomly present a pair in the reduced modes `ranad denoise` supports (no albedo/normal; no
+    diffuse/specular split), so one model serves full and reduced inputs."""
+    if rng.random() < p_no_aux:
+        noisy = without_aux(noisy)
+    if rng.random() < p_no_split:
+        noisy, ref = merged_split(noisy), merged_split(ref)
+    return noisy, ref

@@ -19,7 +19,7 @@ import torch
 from ..errors import RanadError
 from ..fileutil import atomic_output
 from ..model import RaNAD, feature_dim, get_config, prepare
-from .data import find_pairs, sample
+from .data import find_pairs, reduce_inputs, sample
 from .losses import total_loss
 
 CHECKPOINT = "checkpoint.pt"
@@ -40,6 +40,8 @@ class TrainConfig:
     seed: int = 0
     log_every: int = 20
     checkpoint_every: int = 200
+    p_no_aux: float = 0.2         # share of crops shown without albedo/normal (reduced mode)
+    p_no_split: float = 0.2       # share of crops shown without the diffuse/specular split (reduced mode)
 
 
 def learning_rate(cfg: TrainConfig, step: int) -> float:
@@ -87,7 +89,7 @@ def train(cfg: TrainConfig, progress=None) -> dict:
     t0 = time.perf_counter()
     while step < cfg.steps:
         pair = pairs[int(rng.integers(0, len(pairs)))]
-        noisy_img, ref_img = sample(pair, rng, cfg.crop)
+        noisy_img, ref_img = reduce_inputs(*sample(pair, rng, cfg.crop), rng, cfg.p_no_aux, cfg.p_no_split)
         noisy, ref = prepare(noisy_img), prepare(ref_img)
         if noisy.layout.bins == 0:
             continue
