@@ -56,7 +56,7 @@ def evaluate(dataset: str, model, spps=None, kinds=None, max_scenes: int | None 
         outputs["recolour"] = recolour(noisy, outputs["oidn"])
         seconds["recolour"] = time.perf_counter() - t + seconds["oidn"]
         t = time.perf_counter()
-        outputs["ranad"] = denoise_frame(model, noisy)
+        outputs["ranad"] = denoise_frame(model, noisy).image
         seconds["ranad"] = time.perf_counter() - t
         outputs["noisy"], seconds["noisy"] = noisy, 0.0
         flats = {}

@@ -42,6 +42,23 @@ def read_layout(path: str | os.PathLike) -> tuple[ExrLayout, bytes]:
     return parse_layout(buf, path), buf
 
 
+def read_header(path: str | os.PathLike, head_bytes: int = 1 << 18) -> ExrLayout:
+    """The headers only, from the first bytes of the file (the whole file when they are longer): cheap checks of
+    a whole sequence (deep or not, data windows, channels) before any frame is processed."""
+    path = os.fspath(path)
+    try:
+        with open(path, "rb") as f:
+            head = f.read(head_bytes)
+    except OSError as e:
+        raise RanadError(f"cannot read ({e.strerror or e})", path) from None
+    try:
+        return parse_layout(head, path)
+    except RanadError:
+        if len(head) < head_bytes:
+            raise
+        return read_layout(path)[0]
+
+
 def resolve_part(layout: ExrLayout, part: int | str | None, path: str) -> int:
     """Index of the requested part: an index, a part name, or None for the first deep part."""
     n = len(layout.parts)

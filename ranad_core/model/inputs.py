@@ -46,8 +46,18 @@ def _has(img: DeepImage, names) -> bool:
     return all(n in img.channels for n in names)
 
 
-def prepare(img: DeepImage) -> ModelInputs:
-    """Features and noisy layers of a deep image whose bins are in front-to-back order within each pixel."""
+def depth_stats(img: DeepImage) -> tuple[float, float]:
+    """(mean, std) of log depth over the image's bins: the standardisation `prepare` applies. Tiles of a frame
+    pass the whole frame's statistics, so a bin's features do not depend on the tiling."""
+    if img.num_bins == 0:
+        return 0.0, 1.0
+    logz = np.log(np.maximum(img.channel("Z").astype(np.float64), 1e-4))
+    return float(logz.mean()), float(logz.std())
+
+
+def prepare(img: DeepImage, z_stats: tuple[float, float] | None = None) -> ModelInputs:
+    """Features and noisy layers of a deep image whose bins are in front-to-back order within each pixel.
+    `z_stats`: the log-depth standardisation (default: this image's own, see `depth_stats`)."""
     n = img.values.shape[0]
     layers = {}
     for name in RADIANCE_LAYERS:
@@ -56,8 +66,8 @@ def prepare(img: DeepImage) -> ModelInputs:
     layers["alpha"] = _cols(img, ["A"])
     layers["depth"] = _cols(img, ["Z"])
     cov = _cols(img, ["coverage"]) if "coverage" in img.channels else layers["alpha"]
-    logz = np.log(np.maximum(layers["depth"], 1e-4))
-    zn = (logz - logz.mean()) / (logz.std() + 1e-6) if n else logz
+    mean, std = depth_stats(img) if z_stats is None else z_stats
+    zn = ((np.log(np.maximum(layers["depth"], 1e-4)) - mean) / (std + 1e-6)).astype(np.float32)
     aux = [_cols(img, names) if _has(img, names) else np.zeros((n, 3), np.float32) for names in AUX.values()]
     base = np.concatenate([np.log1p(np.maximum(layers["diffuse"], 0)), np.log1p(np.maximum(layers["specular"], 0)),
                            layers["alpha"], cov, zn, *aux], axis=1)

@@ -1,0 +1,139 @@
+"""``ranad denoise``: denoise deep EXR frames and shots with a RaNAD model."""
+
+from __future__ import annotations
+
+import os
+import re
+
+import click
+from tqdm import tqdm
+
+from ranad_core.errors import RanadError
+
+
+UNITS = {"": 1, "K": 1 << 10, "M": 1 << 20, "G": 1 << 30, "T": 1 << 40}
+
+
+def parse_bytes(text: str) -> float:
+    """'8G' -> 8 * 2**30; K, M, G, T with an optional 'B'/'iB'; a bare number is bytes."""
+    m = re.fullmatch(r"\s*([\d.]+)\s*([KMGT]?)(?:i?B)?\s*", text or "", re.I)
+    if not m:
+        raise click.BadParameter(f"expected a size like 8G or 512M, got {text!r}", param_hint="--max-memory")
+    return float(m.group(1)) * UNITS[m.group(2).upper()]
+
+
+@click.command("denoise")
+@click.argument("inputs", nargs=-1, required=True)
+@click.option("-o", "--output", required=True,
+              help="Output file, pattern (denoised/beauty.####.exr) or existing folder. Inputs are never "
+                   "overwritten.")
+@click.option("--frames", help="Frame range for patterns, e.g. 1001-1010 (default: all on disk).")
+@click.option("--model", default=None, help="Shipped model name, .safetensors file or training run folder "
+                                            "(default: the shipped default model).")
+@click.option("--device", type=click.Choice(["auto", "cpu", "cuda"]), default="auto", show_default=True,
+              help="Where the model runs (auto: cpu until the CUDA RaNA kernels are available).")
+@click.option("--threads", type=click.IntRange(1), default=None, help="CPU threads (default: all cores).")
+@click.option("--kind", type=click.Choice(["auto", "deepz", "deepoid"]), default="auto", show_default=True,
+              help="Deep-Z or deep-OID input (auto: deep-OID when an id channel separates every pixel's bins).")
+@click.option("--map", "maps", multiple=True, metavar="LAYER=CHANNELS",
+              help="Channel mapping override, e.g. --map diffuse=diff_direct or --map albedo=aR,aG,aB.")
+@click.option("--keep-noisy", metavar="PREFIX", default=None,
+              help="Also write the noisy versions of the replaced channels under PREFIX (e.g. 'noisy.').")
+@click.option("--tile", type=click.IntRange(16), default=None,
+              help="Tile size in pixels (default: the largest that fits --max-memory).")
+@click.option("--halo", type=click.IntRange(0), default=None,
+              help="Tile halo in pixels (default: the model's receptive field, so tiles match the whole frame).")
+@click.option("--max-memory", default="8G", show_default=True, help="Peak memory to stay under (sets the tiles).")
+@click.option("--cache", "cache_dir", type=click.Path(file_okay=False), default=None,
+              help="Folder for the embedding cache `ranad aov` reuses (one .ranadcache file per frame).")
+@click.option("--skip-existing", is_flag=True, help="Skip frames whose output exists (resume a shot).")
+@click.option("--shard", default=None, metavar="I/N", help="Only farm task I of N (frames I, I+N, ...).")
+@click.option("--strict", is_flag=True, help="Fail on NaN/Inf input samples instead of replacing them.")
+@click.option("--reference", default=None, metavar="PATTERN",
+              help="Reference frames (same layout) to report how much closer to them the output got.")
+def denoise_cmd(inputs, output, frames, model, device, threads, kind, maps, keep_noisy, tile, halo, max_memory,
+                cache_dir, skip_existing, shard, strict, reference):
+    """Denoise deep EXR INPUTS (files or patterns such as beauty.####.exr) into deep EXRs with the same pixels,
+    bins, bin order, channels, ids and header: diffuse, specular, alpha and depth are denoised and the beauty
+    is rebuilt from them.
+
+    Channels are found automatically (R, G, B, A, Z required; diffuse/specular, emission, albedo and N layers
+    used when present; `ranad info` shows the mapping). Without a diffuse/specular split or without albedo and
+    normals the model runs in a reduced mode. Frames are processed in tiles with a halo, written atomically,
+    and optionally cached for `ranad aov`.
+    """
+    import torch
+
+    from ranad_core.channels import detect, parse_overrides
+    from ranad_core.exr import read_deep
+    from ranad_core.exr.inspect import guess_kind
+    from ranad_core.exr.sequence import expand_inputs, format_frame, output_path, shard as take_shard
+    from ranad_core.fileutil import check_writable_target
+    from ranad_core.model.store import load_model
+    from ranad_core.shot import ShotOptions, denoise_shot, prescan
+
+    budget = parse_bytes(max_memory)
+    if device == "cuda":  # auto runs on the CPU until the CUDA kernels land (issue 9)
+        raise RanadError("the CUDA RaNA kernels are not available in this build; use --device cpu", "--device")
+    if threads:
+        torch.set_num_threads(threads)
+    overrides = parse_overrides(maps)
+    frames_list = expand_inputs(list(inputs), frames)
+    if shard:
+        frames_list = take_shard(frames_list, shard)
+    jobs = [(f, output_path(output, f, len(frames_list))) for f in frames_list]
+    for _, out in jobs:
+        check_writable_target(out)
+    if cache_dir:
+        try:
+            os.makedirs(cache_dir, exist_ok=True)
+        except OSError as e:
+            raise RanadError(f"cannot create the cache folder ({e.strerror or e})", cache_dir) from None
+    prescan(frames_list)
+    loaded = load_model(model)
+    first = read_deep(frames_list[0].path)
+    mapping = detect(first, overrides, frames_list[0].path)
+    detected = "deepoid" if guess_kind(first) == "deep-OID" else "deepz"
+    click.echo(f"model {loaded.model_id}; {'deep-OID' if (kind if kind != 'auto' else detected) == 'deepoid' else 'deep-Z'}"
+               f" input; channels: {mapping.mode()}", err=True)
+    opts = ShotOptions(model_spec=model, overrides=overrides, tile=tile, halo=halo, max_memory=budget,
+                       keep_noisy=keep_noisy, cache_dir=cache_dir, skip_existing=skip_existing, strict=strict)
+    scores = []
+
+    def on_frame(job, img, result):
+        if not reference:
+            return
+        frame, _ = job
+        ref_path = format_frame(reference, frame.frame) if frame.frame is not None else reference
+        if os.path.isfile(ref_path):
+            from ranad_core import metrics
+
+            ref = read_deep(ref_path)
+            flat_ref = metrics.flat_rgb(ref)
+            before = metrics.smape(flat_ref, metrics.flat_rgb(img))
+            after = metrics.smape(flat_ref, metrics.flat_rgb(result.image))
+            scores.append((frame.path, before, after))
+
+    with tqdm(total=len(jobs), desc="frames", unit="frame", disable=len(jobs) <= 1, position=0) as fbar, \
+            tqdm(desc="tiles", unit="tile", leave=False, position=1) as tbar:
+        summary = denoise_shot(jobs, loaded, opts, fbar.update, _TileBar(tbar), on_frame)
+    for msg in summary.messages:
+        click.echo(f"ranad: warning: {msg}", err=True)
+    click.echo(f"denoised {summary.frames} frame(s), {summary.bins} bins, in {summary.seconds:.1f} s"
+               + (f"; skipped {summary.skipped} existing" if summary.skipped else ""))
+    for path, before, after in scores:
+        click.echo(f"{os.path.basename(path)}: flattened SMAPE vs reference {before:.4f} -> {after:.4f} "
+                   f"({before / max(after, 1e-12):.1f}x closer)")
+
+
+class _TileBar:
+    """A tqdm bar reused for every frame's tiles."""
+
+    def __init__(self, bar):
+        self.bar = bar
+
+    def reset(self, total):
+        self.bar.reset(total=total)
+
+    def __call__(self, n):
+        self.bar.update(n)

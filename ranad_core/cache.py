@@ -1,0 +1,84 @@
+"""The embedding cache `ranad denoise --cache DIR` writes and `ranad aov` reads (kernel reuse, paper Sec. 6.5.3).
+
+One file per frame, `DIR/<output name>.ranadcache` (safetensors), holding what the reconstruction modules need
+to rerun on other values:
+
+- tensors: `embeddings` float16 [N, dim] (the backbone's per-bin output, bins sorted front to back),
+  `perm` int64 [N] (sorted row i is file row perm[i]), `offsets` int64 [H*W+1], `z_stats` float64 [2] (the
+  depth standardisation used);
+- metadata (strings): `format` ("ranad-cache/1"), `model_id` (name@sha256 prefix of the weights), `model`
+  (what --model resolved to), `input` (absolute path of the denoised file), `frame`, `layout_sha`
+  (fingerprint of the bin layout and depths: SHA-256 of offsets and Z), `mapping` (JSON of the channel map),
+  `tile`, `halo`.
+
+A cache is refused when its format, model id or layout fingerprint does not match what it is used with.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+
+import numpy as np
+
+from .deep import DeepImage
+from .errors import RanadError
+from .fileutil import atomic_output
+
+FORMAT = "ranad-cache/1"
+SUFFIX = ".ranadcache"
+
+
+def layout_fingerprint(img: DeepImage) -> str:
+    """SHA-256 (first 16 hex digits) of the bin layout (offsets) and depths (Z): equal for the beauty file and
+    AOV files of the same frame, different for any other frame or render."""
+    h = hashlib.sha256(np.ascontiguousarray(img.offsets, np.int64).tobytes())
+    if "Z" in img.channels:
+        h.update(np.ascontiguousarray(img.channel("Z"), np.float32).tobytes())
+    return h.hexdigest()[:16]
+
+
+def cache_path(folder: str, output: str) -> str:
+    name = os.path.basename(output)
+    if name.lower().endswith(".exr"):
+        name = name[:-4]
+    return os.path.join(folder, name + SUFFIX)
+
+
+def write_cache(path: str, img: DeepImage, result, model_id: str, model_spec: str, input_path: str,
+                frame: int | None, tile: int, halo: int) -> None:
+    from safetensors.numpy import save_file
+
+    tensors = {"embeddings": np.ascontiguousarray(result.embeddings, np.float16),
+               "perm": np.ascontiguousarray(result.perm, np.int64),
+               "offsets": np.ascontiguousarray(img.offsets, np.int64),
+               "z_stats": np.asarray(result.z_stats, np.float64)}
+    meta = {"format": FORMAT, "model_id": model_id, "model": model_spec, "input": os.path.abspath(input_path),
+            "frame": "" if frame is None else str(frame), "layout_sha": layout_fingerprint(img),
+            "mapping": json.dumps(result.mapping.describe()), "tile": str(tile), "halo": str(halo)}
+    with atomic_output(path) as tmp:
+        save_file(tensors, tmp, metadata=meta)
+
+
+def read_cache(path: str) -> tuple[dict, dict]:
+    """(tensors as numpy arrays, metadata); RanadError for files that are not ranad caches."""
+    from safetensors import safe_open
+
+    try:
+        with safe_open(path, framework="np") as f:
+            meta = dict(f.metadata() or {})
+            tensors = {k: f.get_tensor(k) for k in f.keys()}
+    except Exception as e:
+        raise RanadError(f"not a ranad cache ({type(e).__name__})", path) from None
+    if meta.get("format") != FORMAT:
+        raise RanadError(f"cache format {meta.get('format')!r} is not {FORMAT!r}; rerun ranad denoise --cache", path)
+    return tensors, meta
+
+
+def check_cache(meta: dict, path: str, model_id: str | None = None, img: DeepImage | None = None) -> None:
+    """Refuse a stale cache: other weights, or another frame / bin layout than `img`."""
+    if model_id is not None and meta.get("model_id") != model_id:
+        raise RanadError(f"cache was made with model {meta.get('model_id')}, not {model_id}", path)
+    if img is not None and meta.get("layout_sha") != layout_fingerprint(img):
+        raise RanadError("cache does not match this file's bin layout or depths (another frame or render?)", path)

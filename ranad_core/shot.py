@@ -1,0 +1,110 @@
+"""Denoising a shot: frames in, denoised frames (and caches) out, each written atomically.
+
+The loop behind `ranad denoise`: reads a frame, checks it against the first (resolution and data window must
+match across a sequence), denoises it in tiles sized to the memory budget, writes the output (and the AOV
+cache) through a temporary file, and collects a summary. Frames whose output exists are skipped when asked,
+so an interrupted farm task resumes where it stopped.
+"""
+
+from __future__ import annotations
+
+import os
+import time
+from dataclasses import dataclass, field
+
+from . import cache as cache_io
+from .channels import detect
+from .denoise import choose_tile, denoise_frame, halo_for
+from .errors import RanadError
+from .exr import read_deep, read_header, resolve_part, write_deep
+
+
+@dataclass
+class ShotOptions:
+    model_spec: str | None = None
+    overrides: dict = field(default_factory=dict)    # channels.parse_overrides output
+    tile: int | None = None                          # None: chosen from max_memory
+    halo: int | None = None                          # None: the model's receptive field
+    max_memory: float = 8e9                          # bytes, the peak to stay under
+    keep_noisy: str | None = None
+    cache_dir: str | None = None
+    skip_existing: bool = False
+    strict: bool = False                             # non-finite samples: error instead of fix
+
+
+@dataclass
+class ShotSummary:
+    frames: int = 0
+    skipped: int = 0
+    bins: int = 0
+    nonfinite: int = 0
+    seconds: float = 0.0
+    messages: list = field(default_factory=list)
+
+
+def prescan(frames) -> None:
+    """Check every input's header before any work: deep, and one data window for the whole sequence."""
+    first = None
+    for frame in frames:
+        layout = read_header(frame.path)
+        part = layout.parts[resolve_part(layout, None, frame.path)]
+        if first is None:
+            first = (frame.path, part.data_window)
+        elif part.data_window != first[1]:
+            raise RanadError(f"data window {part.data_window} differs from {first[1]} of {first[0]} "
+                             "(frames of a sequence must match)", frame.path)
+
+
+def frame_memory(img) -> float:
+    """Bytes the pipeline holds per frame besides the model's tile work: the decoded frame, its canonical and
+    sorted copies, the output and per-layer results (about six copies of the values)."""
+    return 6.0 * img.values.nbytes + 64.0 * img.num_bins
+
+
+def denoise_shot(jobs, loaded, opts: ShotOptions, frame_bar=None, tile_bar=None, on_frame=None) -> ShotSummary:
+    """jobs: [(Frame, output path)]; loaded: model.store.LoadedModel. `frame_bar`/`tile_bar`: callables
+    (n) for progress; `tile_bar.reset(total)` is called per frame when present. `on_frame(job, image, result)`
+    is called after each frame is written."""
+    summary = ShotSummary()
+    model = loaded.model
+    halo = halo_for(model) if opts.halo is None else opts.halo
+    first = None
+    for frame, out in jobs:
+        t0 = time.perf_counter()
+        if opts.skip_existing and os.path.exists(out):
+            summary.skipped += 1
+            if frame_bar:
+                frame_bar(1)
+            continue
+        img = read_deep(frame.path)
+        if first is None:
+            first = (frame.path, img.data_window)
+        elif img.data_window != first[1]:
+            raise RanadError(f"data window {img.data_window} differs from {first[1]} of {first[0]} "
+                             "(frames of a sequence must match)", frame.path)
+        mapping = detect(img, opts.overrides, frame.path)
+        tile = opts.tile or choose_tile(img.offsets, img.width, img.height, halo,
+                                        max(opts.max_memory - frame_memory(img), 256e6))
+        ntiles = sum(1 for _ in range(0, img.height, tile)) * sum(1 for _ in range(0, img.width, tile))
+        if tile_bar is not None and hasattr(tile_bar, "reset"):
+            tile_bar.reset(ntiles)
+        result = denoise_frame(model, img, mapping, tile, halo, opts.keep_noisy, opts.cache_dir is not None,
+                               tile_bar)
+        if result.nonfinite:
+            msg = f"{frame.path}: {result.nonfinite} bin(s) with NaN/Inf values"
+            if opts.strict:
+                raise RanadError(f"{result.nonfinite} bin(s) with NaN/Inf values", frame.path)
+            summary.messages.append(msg + " (replaced: colour and alpha 0, depth the frame's largest)")
+        write_deep(out, result.image)
+        if opts.cache_dir:
+            cache_io.write_cache(cache_io.cache_path(opts.cache_dir, out), img, result, loaded.model_id,
+                                 opts.model_spec or "", frame.path, frame.frame, tile, halo)
+        summary.frames += 1
+        summary.bins += result.bins
+        summary.nonfinite += result.nonfinite
+        summary.seconds += time.perf_counter() - t0
+        if on_frame:
+            on_frame((frame, out), img, result)
+        if frame_bar:
+            frame_bar(1)
+    return summary
