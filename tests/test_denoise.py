@@ -1,0 +1,184 @@
+"""`ranad denoise`: tiles equal the whole frame, the file's layout survives, reduced modes run, bad input fails
+cleanly with nothing written, shards cover a shot once, the AOV cache is written and refused when stale."""
+
+from __future__ import annotations
+
+import os
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+from click.testing import CliRunner
+
+from ranad_cli.main import cli
+from ranad_core import cache as cache_io
+from ranad_core.channels import detect, parse_overrides
+from ranad_core.denoise import denoise_frame, halo_for, receptive_field
+from ranad_core.errors import RanadError
+from ranad_core.exr import read_deep, write_deep
+from ranad_core.model import RaNAD, ReconConfig, feature_dim
+from ranad_core.model.config import ModelConfig
+
+SHOT = Path(__file__).resolve().parents[1] / "examples" / "synth_shot"
+FRAME = SHOT / "noisy_spp16.0001.exr"
+
+
+def tiny_model():
+    """A small untrained model (receptive field 13 px, halo 16), so tiling a 48x48 frame is a real test."""
+    torch.manual_seed(0)
+    rc = ReconConfig(scales=2, heads=2, head_dim=8, radius=1.5, radius_growth=0.5)
+    cfg = ModelConfig("tiny", dim=16, unets=1, levels=1, blocks_per_level=1, heads=4, head_dim=8, radius=1.5,
+                      radius_growth=0.5, recon={"diffuse": rc, "specular": rc, "alpha": rc, "depth": rc})
+    return RaNAD(cfg, feature_dim()).eval()
+
+
+@pytest.fixture(scope="module")
+def model_file(tmp_path_factory):
+    """The tiny model as a .safetensors file the CLI can load."""
+    from safetensors.torch import save_file
+    import json
+
+    m = tiny_model()
+    path = tmp_path_factory.mktemp("model") / "tiny.safetensors"
+    save_file({k: v.contiguous() for k, v in m.state_dict().items()}, str(path),
+              metadata={"model_config": json.dumps(m.config.to_dict())})
+    return str(path)
+
+
+def run(*args):
+    return CliRunner().invoke(cli, [str(a) for a in args])
+
+
+def test_tiles_equal_the_whole_frame():
+    model = tiny_model()
+    assert receptive_field(model) == 13 and halo_for(model) == 16
+    img = read_deep(FRAME)
+    whole = denoise_frame(model, img)
+    tiled = denoise_frame(model, img, tile=16)
+    assert whole.tiles == 1 and tiled.tiles == 9
+    np.testing.assert_allclose(tiled.image.values, whole.image.values, rtol=1e-5, atol=1e-6)
+    cut = denoise_frame(model, img, tile=16, halo=0)       # without a halo the seams differ: the test can fail
+    assert np.abs(cut.image.values - whole.image.values).max() > 1e-3
+
+
+def test_output_keeps_layout_ids_header_and_channels(tmp_path, model_file):
+    out = tmp_path / "den.exr"
+    r = run("denoise", FRAME, "-o", out, "--model", model_file, "--keep-noisy", "noisy.")
+    assert r.exit_code == 0, r.output
+    a, b = read_deep(FRAME), read_deep(out)
+    np.testing.assert_array_equal(a.offsets, b.offsets)
+    np.testing.assert_array_equal(a.ids["id"], b.ids["id"])
+    assert set(a.channels) <= set(b.channels) and b.header.keys() == a.header.keys()
+    kept = [c for c in b.channels if c.startswith("noisy.")]
+    assert {"noisy.R", "noisy.A", "noisy.Z", "noisy.diffuse.R", "noisy.specular.B"} <= set(kept)
+    np.testing.assert_array_equal(b.channel("noisy.R"), a.channel("R"))
+    assert not np.array_equal(b.channel("R"), a.channel("R"))
+    untouched = [c for c in a.channels if c.split(".")[0] in ("albedo", "N", "emission", "lg_key", "motion_next")]
+    for c in untouched:
+        np.testing.assert_array_equal(b.channel(c), a.channel(c))
+    assert not list(tmp_path.glob("*.tmp*")) and sorted(p.name for p in tmp_path.iterdir()) == ["den.exr"]
+
+
+def test_reduced_modes(tmp_path, model_file):
+    img = read_deep(FRAME)
+    beauty_only = img.select(["R", "G", "B", "A", "Z"])
+    assert detect(beauty_only).mode() == "no split (beauty through the diffuse kernels), without guides"
+    path = tmp_path / "rgbaz.exr"
+    write_deep(path, beauty_only)
+    r = run("denoise", path, "-o", tmp_path / "out.exr", "--model", model_file)
+    assert r.exit_code == 0, r.output
+    out = read_deep(tmp_path / "out.exr")
+    assert out.channels == beauty_only.channels and np.isfinite(out.values).all()
+    assert 0 <= out.channel("A").min() and out.channel("A").max() <= 1
+    assert not np.array_equal(out.channel("G"), beauty_only.channel("G"))
+    # a renamed split found through --map
+    ren = img.select([c for c in img.channels if not c.startswith(("diffuse.", "specular."))])
+    vals = np.concatenate([ren.values, img.select([f"diffuse.{c}" for c in "RGB"]).values], 1)
+    renamed = ren.with_values(vals, ren.channels + ["kd.R", "kd.G", "kd.B"])
+    assert detect(renamed, parse_overrides(["diffuse=kd"])).layers["diffuse"] == ("kd.R", "kd.G", "kd.B")
+    with pytest.raises(RanadError, match="no such channels"):
+        detect(renamed, parse_overrides(["diffuse=nothing"]))
+
+
+def copy_shot(dst: Path, frames=(0, 1, 2)) -> str:
+    dst.mkdir(parents=True, exist_ok=True)
+    for f in frames:
+        shutil.copy(SHOT / f"noisy_spp16.{f:04d}.exr", dst / f"beauty.{f:04d}.exr")
+    return str(dst / "beauty.####.exr")
+
+
+def test_bad_inputs_fail_with_one_line_and_write_nothing(tmp_path, model_file):
+    out = tmp_path / "out"
+    out.mkdir()
+    # mismatched resolution inside a sequence
+    pattern = copy_shot(tmp_path / "a")
+    img = read_deep(FRAME)
+    write_deep(tmp_path / "a" / "beauty.0002.exr", img.crop((0, 0, 31, 31)))
+    r = run("denoise", pattern, "-o", out / "d.####.exr", "--model", model_file)
+    assert r.exit_code == 2 and "differs from" in r.output and "beauty.0002.exr" in r.output
+    assert r.output.count("\n") == 1 and not list(out.iterdir())
+    # a missing frame of a range
+    pattern = copy_shot(tmp_path / "b", (0, 2))
+    r = run("denoise", pattern, "--frames", "0-2", "-o", out / "d.####.exr", "--model", model_file)
+    assert r.exit_code == 2 and "frame 1 is missing" in r.output and not list(out.iterdir())
+    # a missing required channel
+    write_deep(tmp_path / "noz.exr", img.select(["R", "G", "B", "A"]))
+    r = run("denoise", tmp_path / "noz.exr", "-o", out / "x.exr", "--model", model_file)
+    assert r.exit_code == 2 and "missing required channel(s) Z" in r.output and not list(out.iterdir())
+    # NaN/Inf samples: refused with --strict, replaced (and reported) otherwise
+    vals = img.values.copy()
+    vals[5, img.channels.index("diffuse.R")] = np.nan
+    vals[9, img.channels.index("Z")] = np.inf
+    write_deep(tmp_path / "nan.exr", img.with_values(vals))
+    r = run("denoise", tmp_path / "nan.exr", "-o", out / "x.exr", "--model", model_file, "--strict")
+    assert r.exit_code == 2 and "2 bin(s) with NaN/Inf" in r.output and not list(out.iterdir())
+    r = run("denoise", tmp_path / "nan.exr", "-o", out / "x.exr", "--model", model_file)
+    assert r.exit_code == 0 and "warning" in r.output
+    res = read_deep(out / "x.exr")
+    replaced = [res.channels.index(c) for c in ("R", "G", "B", "A", "Z", "diffuse.R", "specular.R")]
+    assert np.isfinite(res.values[:, replaced]).all()
+    # an unwritable output
+    r = run("denoise", FRAME, "-o", tmp_path / "no" / "such" / "x.exr", "--model", model_file)
+    assert r.exit_code == 2 and "output folder does not exist" in r.output
+    # not a deep file
+    (tmp_path / "junk.exr").write_bytes(b"junk")
+    r = run("denoise", tmp_path / "junk.exr", "-o", out / "j.exr", "--model", model_file)
+    assert r.exit_code == 2 and "junk.exr" in r.output and not (out / "j.exr").exists()
+
+
+def test_shards_cover_the_shot_once_and_skip_existing_resumes(tmp_path, model_file):
+    pattern = copy_shot(tmp_path / "shot")
+    out = tmp_path / "out"
+    out.mkdir()
+    for i in (1, 2):
+        r = run("denoise", pattern, "-o", out / "d.####.exr", "--model", model_file, "--shard", f"{i}/2")
+        assert r.exit_code == 0, r.output
+        assert f"denoised {2 if i == 1 else 1} frame(s)" in r.output
+    assert sorted(p.name for p in out.iterdir()) == ["d.0000.exr", "d.0001.exr", "d.0002.exr"]
+    os.remove(out / "d.0001.exr")
+    r = run("denoise", pattern, "-o", out / "d.####.exr", "--model", model_file, "--skip-existing")
+    assert r.exit_code == 0 and "denoised 1 frame(s)" in r.output and "skipped 2 existing" in r.output
+    r = run("denoise", pattern, "-o", out / "d.####.exr", "--model", model_file, "--shard", "3/2")
+    assert r.exit_code == 2 and "shard" in r.output
+
+
+def test_cache_is_written_and_refused_when_stale(tmp_path, model_file):
+    out, cache = tmp_path / "d.exr", tmp_path / "cache"
+    r = run("denoise", FRAME, "-o", out, "--model", model_file, "--cache", cache)
+    assert r.exit_code == 0, r.output
+    path = cache_io.cache_path(str(cache), str(out))
+    tensors, meta = cache_io.read_cache(path)
+    img = read_deep(FRAME)
+    assert tensors["embeddings"].shape == (img.num_bins, 16) and tensors["embeddings"].dtype == np.float16
+    np.testing.assert_array_equal(tensors["offsets"], img.offsets)
+    assert meta["input"] == os.path.abspath(FRAME) and meta["model_id"].startswith("tiny@")
+    cache_io.check_cache(meta, path, meta["model_id"], img)
+    with pytest.raises(RanadError, match="made with model"):
+        cache_io.check_cache(meta, path, "other@123", img)
+    with pytest.raises(RanadError, match="bin layout"):
+        cache_io.check_cache(meta, path, None, read_deep(SHOT / "noisy_spp16.0002.exr"))
+    (tmp_path / "bad.ranadcache").write_bytes(b"x" * 20)
+    with pytest.raises(RanadError, match="not a ranad cache"):
+        cache_io.read_cache(str(tmp_path / "bad.ranadcache"))
