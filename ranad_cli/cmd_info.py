@@ -31,6 +31,11 @@ def _print_text(d: dict) -> None:
         if not p["deep"]:
             click.echo("    flat image (not deep)")
             continue
+        dc = p.get("denoise_channels", {})
+        layers = ", ".join(f"{k}={v}" for k, v in dc.items() if k != "mode" and v != "-")
+        click.echo(f"    ranad denoise reads: {dc.get('mode', '?')}" + (f" ({layers})" if layers else ""))
+        if "bins_per_pixel" not in p:
+            continue
         b = p["bins_per_pixel"]
         click.echo(f"    {p['kind_guess']} (guess); {p['bins']} bins; per pixel min {b['min']}, "
                    f"mean {b['mean']:.2f} (covered {b['mean_covered']:.2f}), max {b['max']}; "

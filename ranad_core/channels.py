@@ -97,7 +97,12 @@ def parse_overrides(items) -> dict:
 
 def detect(img: DeepImage, overrides: dict | None = None, source: str | None = None) -> ChannelMap:
     """The ChannelMap of `img`; RanadError naming `source` when a required channel is missing."""
-    ch = list(img.channels)
+    return detect_names(img.channels, overrides, source)
+
+
+def detect_names(channels, overrides: dict | None = None, source: str | None = None) -> ChannelMap:
+    """The ChannelMap of a list of value channel names (what `ranad info` shows before any pixel is read)."""
+    ch = list(channels)
     missing = [c for c in ("R", "G", "B", "A", "Z") if c not in ch]
     if missing:
         raise RanadError(f"missing required channel(s) {', '.join(missing)} (have {', '.join(ch)})", source)

@@ -89,6 +89,15 @@ def describe(path: str | os.PathLike, stats: bool = True) -> dict[str, Any]:
         }
         if tiled and part.tiles:
             info["tiles"] = list(part.tiles[:2])
+        if deep:
+            from ..channels import detect_names
+            from ..errors import RanadError
+
+            try:
+                names = [c.name for c in part.channels if c.type != "uint"]
+                info["denoise_channels"] = detect_names(names).describe()
+            except RanadError as e:
+                info["denoise_channels"] = {"mode": f"cannot denoise: {e.problem}"}
         if deep and stats:
             info.update(_deep_stats(read_part(path, layout, buf, i)))
         out["parts"].append(info)
