@@ -25,8 +25,8 @@ def parse_bytes(text: str) -> float:
 @click.command("denoise")
 @click.argument("inputs", nargs=-1, required=True)
 @click.option("-o", "--output", required=True,
-              help="Output file, pattern (denoised/beauty.####.exr) or existing folder. Inputs are never "
-                   "overwritten.")
+              help="Output file, pattern (denoised/beauty.####.exr) or folder ending in '/'; missing folders are "
+                   "created. Inputs are never overwritten.")
 @click.option("--frames", help="Frame range for patterns, e.g. 1001-1010 (default: all on disk).")
 @click.option("--model", default=None, help="Shipped model name, .safetensors file or training run folder "
                                             "(default: the shipped default model).")
@@ -67,7 +67,7 @@ def denoise_cmd(inputs, output, frames, model, device, threads, kind, maps, keep
     from ranad_core.channels import detect, parse_overrides
     from ranad_core.exr import read_deep
     from ranad_core.exr.inspect import guess_kind
-    from ranad_core.exr.sequence import expand_inputs, format_frame, output_path, shard as take_shard
+    from ranad_core.exr.sequence import expand_inputs, format_frame, is_pattern, output_path, shard as take_shard
     from ranad_core.fileutil import check_writable_target
     from ranad_core.model.store import load_model
     from ranad_core.shot import ShotOptions, denoise_shot, prescan
@@ -81,6 +81,10 @@ def denoise_cmd(inputs, output, frames, model, device, threads, kind, maps, keep
     frames_list = expand_inputs(list(inputs), frames)
     if shard:
         frames_list = take_shard(frames_list, shard)
+    if is_pattern(output) or not output.endswith((os.sep, "/")):
+        _make_folder(os.path.dirname(os.path.abspath(output)), output)
+    else:
+        _make_folder(output, output)
     jobs = [(f, output_path(output, f, len(frames_list))) for f in frames_list]
     for _, out in jobs:
         check_writable_target(out)
@@ -124,6 +128,14 @@ def denoise_cmd(inputs, output, frames, model, device, threads, kind, maps, keep
     for path, before, after in scores:
         click.echo(f"{os.path.basename(path)}: flattened SMAPE vs reference {before:.4f} -> {after:.4f} "
                    f"({before / max(after, 1e-12):.1f}x closer)")
+
+
+def _make_folder(folder: str, what: str) -> None:
+    """Output folders are created (a farm task's output tree may not exist yet)."""
+    try:
+        os.makedirs(folder, exist_ok=True)
+    except OSError as e:
+        raise RanadError(f"cannot create the output folder ({e.strerror or e})", what) from None
 
 
 class _TileBar:

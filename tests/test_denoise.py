@@ -140,8 +140,11 @@ def test_bad_inputs_fail_with_one_line_and_write_nothing(tmp_path, model_file):
     replaced = [res.channels.index(c) for c in ("R", "G", "B", "A", "Z", "diffuse.R", "specular.R")]
     assert np.isfinite(res.values[:, replaced]).all()
     # an unwritable output
-    r = run("denoise", FRAME, "-o", tmp_path / "no" / "such" / "x.exr", "--model", model_file)
-    assert r.exit_code == 2 and "output folder does not exist" in r.output
+    (tmp_path / "afile").write_text("")
+    r = run("denoise", FRAME, "-o", tmp_path / "afile" / "x.exr", "--model", model_file)
+    assert r.exit_code == 2 and "cannot create the output folder" in r.output
+    r = run("denoise", FRAME, "-o", tmp_path / "new" / "folder" / "x.exr", "--model", model_file)
+    assert r.exit_code == 0 and (tmp_path / "new" / "folder" / "x.exr").is_file()
     # not a deep file
     (tmp_path / "junk.exr").write_bytes(b"junk")
     r = run("denoise", tmp_path / "junk.exr", "-o", out / "j.exr", "--model", model_file)
