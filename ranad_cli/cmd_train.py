@@ -23,7 +23,12 @@ from tqdm import tqdm
               help="Share of crops shown without albedo/normal, so the model serves files that lack them.")
 @click.option("--p-no-split", default=0.2, show_default=True, type=click.FloatRange(0, 1),
               help="Share of crops shown without the diffuse/specular split (beauty only).")
-def train_cmd(dataset, run, config, steps, crop, lr, seed, checkpoint_every, processes, p_no_aux, p_no_split):
+@click.option("--window", default=3, show_default=True, type=click.IntRange(2, 7),
+              help="Cross-frame configs (e.g. cpu-small-xf): frames per training window around the centre.")
+@click.option("--init", default=None,
+              help="Cross-frame configs: single-frame weights to start from (model name, .safetensors or run).")
+def train_cmd(dataset, run, config, steps, crop, lr, seed, checkpoint_every, processes, p_no_aux, p_no_split, window,
+              init):
     """Train on DATASET (the output of `ranad synth`): centre-frame pairs, random crops, flips and transposes,
     SMAPE on the diffuse and specular bins and on the composited colour plus SSIM on it, L1 on alpha and depth.
     Resumes from RUN/checkpoint.pt when it exists."""
@@ -35,7 +40,8 @@ def train_cmd(dataset, run, config, steps, crop, lr, seed, checkpoint_every, pro
     except ValueError as e:
         raise click.BadParameter(str(e), param_hint="--config") from None
     cfg = TrainConfig(dataset=dataset, run=run, config=config, steps=steps, crop=crop, lr=lr, seed=seed,
-                      checkpoint_every=checkpoint_every, p_no_aux=p_no_aux, p_no_split=p_no_split)
+                      checkpoint_every=checkpoint_every, p_no_aux=p_no_aux, p_no_split=p_no_split,
+                      window=window, init=init)
     if processes > 1:
         spawn_local(cfg, processes)
         click.echo(f"done: {steps} steps x {processes} processes, log in {run}/train.log")

@@ -30,6 +30,8 @@ class ModelConfig:
     radius: float                # RaNA radius at full resolution
     radius_growth: float         # added per coarser level
     recon: dict = field(default_factory=dict)  # output layer -> ReconConfig (diffuse, specular, alpha, depth)
+    window: int = 1              # frames the model sees (1: single-frame; >1: cross-frame, up to this many)
+    temporal_radius: float = 1.0  # radius of the T-Mix blocks and the temporal reconstruction step
 
     def to_dict(self) -> dict:
         d = asdict(self)
@@ -58,6 +60,10 @@ CONFIGS = {
                          radius=3.5, radius_growth=1.0,
                          recon=_recon(diffuse={"scales": 4, "radius": 3.5}, specular={"scales": 3})),
 }
+
+
+CONFIGS["cpu-small-xf"] = ModelConfig(**{**CONFIGS["cpu-small"].__dict__, "name": "cpu-small-xf", "window": 7,
+                                        "temporal_radius": 1.0})
 
 
 def get_config(name: str) -> ModelConfig:

@@ -27,7 +27,7 @@ DEFAULT_MODEL = "cpu-small-v1"
 
 @dataclass
 class LoadedModel:
-    model: RaNAD
+    model: RaNAD                  # or CrossFrameRaNAD (config.window > 1)
     model_id: str
     metadata: dict
 
@@ -75,7 +75,12 @@ def load_model(spec: str | None = None, backend: str = "auto") -> LoadedModel:
         raise
     except Exception as e:  # corrupt or foreign files: one line naming the file
         raise RanadError(f"not a ranad model ({type(e).__name__}: {e})", path) from None
-    model = RaNAD(config, feature_dim(), backend=backend)
+    if config.window > 1:
+        from .crossframe import CrossFrameRaNAD
+
+        model = CrossFrameRaNAD(config, feature_dim(), backend=backend)
+    else:
+        model = RaNAD(config, feature_dim(), backend=backend)
     try:
         model.load_state_dict(state)
     except RuntimeError as e:

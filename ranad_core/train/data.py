@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..deep import DeepImage
+from ..deep import DeepImage, gather_bins
 from ..errors import RanadError
 from ..exr import read_deep
 
@@ -91,7 +91,15 @@ def sample(pair: Pair, rng: np.random.Generator, crop: int) -> tuple:
     y0 = y0d + int(rng.integers(0, noisy.height - ch + 1))
     win = (x0, y0, x0 + cw - 1, y0 + ch - 1)
     fx, fy, tr = (bool(b) for b in rng.integers(0, 2, 3))
-    return transform(noisy.crop(win), fx, fy, tr), transform(ref.crop(win), fx, fy, tr)
+    noisy, ref = sorted_pair(noisy.crop(win), ref.crop(win))
+    return transform(noisy, fx, fy, tr), transform(ref, fx, fy, tr)
+
+
+def sorted_pair(noisy: DeepImage, ref: DeepImage) -> tuple:
+    """Both images' bins front to back by the noisy image's depths (the model's convention; deep-OID files are
+    ordered by object, not depth), the reference's bins permuted exactly like the noisy ones."""
+    srt, perm = noisy.sorted()
+    return srt, gather_bins(ref, perm, ref.offsets)
 
 
 AUX_LAYERS = ("albedo", "N")
@@ -124,3 +132,55 @@ def reduce_inputs(noisy: DeepImage, ref: DeepImage, rng: np.random.Generator, p_
     if rng.random() < p_no_split:
         noisy, ref = merged_split(noisy), merged_split(ref)
     return noisy, ref
+
+
+def window_frames(pair: Pair, offsets) -> list:
+    """Paths of the noisy frames at `offsets` from the pair's centre frame (those that exist)."""
+    name = pair.noisy.name               # noisy_spp16.0001.exr
+    stem, frame, ext = name.rsplit(".", 2)
+    c = int(frame)
+    paths = [pair.noisy.parent / f"{stem}.{c + o:0{len(frame)}d}.{ext}" for o in offsets]
+    return [p for p in paths if p.is_file()]
+
+
+@lru_cache(maxsize=32)
+def compensated(pair: Pair, lo: int, hi: int) -> tuple:
+    """(the noisy frames centre+lo .. centre+hi moved onto the centre frame with bins sorted front to back, the
+    centre's index, the centre frame's sort permutation)."""
+    from ..motion import compensate
+
+    frames = [load(p) for p in window_frames(pair, range(lo, hi + 1))]
+    centre = -lo
+    moved, _ = compensate(frames, centre)
+    done = [f.sorted() for f in moved]
+    return tuple(f for f, _ in done), centre, done[centre][1]
+
+
+def sample_window(pair: Pair, rng: np.random.Generator, crop: int, window: int) -> tuple:
+    """(noisy crops of a window of frames, the reference crop, the centre's index): windows up to `window`
+    frames around the centre, shortened at random as at a sequence's ends, the same crop and flip for all."""
+    half = (window - 1) // 2
+    have = [o for o in range(-half, half + 1) if window_frames(pair, [o])]
+    lo_all, hi_all = min(have), max(have)
+    r = rng.random()
+    lo, hi = (lo_all, hi_all) if r < 0.6 else ((lo_all, 0) if r < 0.75 else ((0, hi_all) if r < 0.9 else (0, 0)))
+    frames, centre, perm = compensated(pair, lo, hi)
+    ref = load(pair.reference)
+    ref = gather_bins(ref, perm, ref.offsets)            # in the centre frame's sorted order
+    x0d, y0d = ref.data_window[:2]
+    cw, ch = min(crop, ref.width), min(crop, ref.height)
+    x0 = x0d + int(rng.integers(0, ref.width - cw + 1))
+    y0 = y0d + int(rng.integers(0, ref.height - ch + 1))
+    win = (x0, y0, x0 + cw - 1, y0 + ch - 1)
+    fx, fy, tr = (bool(b) for b in rng.integers(0, 2, 3))
+    return ([transform(f.crop(win), fx, fy, tr) for f in frames], transform(ref.crop(win), fx, fy, tr), centre)
+
+
+def reduce_window(frames: list, ref: DeepImage, rng: np.random.Generator, p_no_aux: float,
+                  p_no_split: float) -> tuple:
+    """reduce_inputs for a window: the same reduction for every frame."""
+    if rng.random() < p_no_aux:
+        frames = [without_aux(f) for f in frames]
+    if rng.random() < p_no_split:
+        frames, ref = [merged_split(f) for f in frames], merged_split(ref)
+    return frames, ref

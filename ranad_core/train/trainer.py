@@ -19,7 +19,7 @@ import torch
 from ..errors import RanadError
 from ..fileutil import atomic_output
 from ..model import RaNAD, feature_dim, get_config, prepare
-from .data import find_pairs, reduce_inputs, sample
+from .data import find_pairs, reduce_inputs, reduce_window, sample, sample_window
 from .losses import total_loss
 
 CHECKPOINT = "checkpoint.pt"
@@ -42,6 +42,8 @@ class TrainConfig:
     checkpoint_every: int = 200
     p_no_aux: float = 0.2         # share of crops shown without albedo/normal (reduced mode)
     p_no_split: float = 0.2       # share of crops shown without the diffuse/specular split (reduced mode)
+    window: int = 3               # cross-frame configs: frames per training window (centre +- (window-1)/2)
+    init: str | None = None       # cross-frame configs: single-frame weights to start from (model name/file/run)
 
 
 def learning_rate(cfg: TrainConfig, step: int) -> float:
@@ -57,6 +59,23 @@ def save_checkpoint(path: str, model, opt, step: int, cfg: TrainConfig, rng: np.
         torch.save(state, tmp)
 
 
+def build_model(cfg: TrainConfig, config):
+    """A fresh model for `config`: single-frame, or cross-frame (started from `cfg.init`'s single-frame weights
+    when given, so training begins from a working denoiser)."""
+    if config.window <= 1:
+        return RaNAD(config, feature_dim())
+    from ..model.crossframe import CrossFrameRaNAD
+
+    if cfg.init:
+        from ..model.store import load_model
+
+        single = load_model(cfg.init).model
+        if single.config.dim != config.dim or single.config.unets != config.unets:
+            raise RanadError(f"--init model {single.config.name!r} does not match config {config.name!r}", cfg.init)
+        return CrossFrameRaNAD.from_single(single, config, feature_dim()).train()
+    return CrossFrameRaNAD(config, feature_dim())
+
+
 def train(cfg: TrainConfig, progress=None) -> dict:
     """Trains (or resumes) into cfg.run; returns the last step's loss parts. Joins the process group when
     torch.distributed is initialised (see `spawn_local`, or torchrun's environment)."""
@@ -67,7 +86,9 @@ def train(cfg: TrainConfig, progress=None) -> dict:
     pairs = find_pairs(cfg.dataset)
     os.makedirs(cfg.run, exist_ok=True)
     torch.manual_seed(cfg.seed)
-    model = RaNAD(get_config(cfg.config), feature_dim())
+    config = get_config(cfg.config)
+    cross = config.window > 1
+    model = build_model(cfg, config)
     opt = torch.optim.AdamW(model.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay)
     rng = np.random.default_rng(cfg.seed if world == 1 else [cfg.seed, rank])
     step = 0
@@ -89,13 +110,19 @@ def train(cfg: TrainConfig, progress=None) -> dict:
     t0 = time.perf_counter()
     while step < cfg.steps:
         pair = pairs[int(rng.integers(0, len(pairs)))]
-        noisy_img, ref_img = reduce_inputs(*sample(pair, rng, cfg.crop), rng, cfg.p_no_aux, cfg.p_no_split)
-        noisy, ref = prepare(noisy_img), prepare(ref_img)
+        if cross:
+            frames, ref_img, centre = sample_window(pair, rng, cfg.crop, cfg.window)
+            frames, ref_img = reduce_window(frames, ref_img, rng, cfg.p_no_aux, cfg.p_no_split)
+            window = [prepare(f) for f in frames]
+            noisy, ref = window[centre], prepare(ref_img)
+        else:
+            noisy_img, ref_img = reduce_inputs(*sample(pair, rng, cfg.crop), rng, cfg.p_no_aux, cfg.p_no_split)
+            noisy, ref = prepare(noisy_img), prepare(ref_img)
         if noisy.layout.bins == 0:
             continue
         for g in opt.param_groups:
             g["lr"] = learning_rate(cfg, step)
-        pred = net(noisy)
+        pred = net(window, centre) if cross else net(noisy)
         loss, parts = total_loss(pred, ref.layers, noisy.layout.offsets, noisy.layout.size)
         opt.zero_grad()
         loss.backward()

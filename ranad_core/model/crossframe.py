@@ -1,0 +1,122 @@
+"""Cross-frame RaNAD (paper Sec. 4.2): the centre frame denoised with its motion-compensated neighbours.
+
+- Inputs: every frame of the window is prepared like a single frame, plus a one-hot of its offset from the
+  centre (-3..+3), after motion compensation onto the centre frame (motion.py), so all frames share one grid.
+- Backbone: the single-frame U-Nets run on every frame (frame-parallel, shared weights); after each U-Net a
+  temporal-mix (T-Mix) RaNA block lets every bin attend to the bins of its pixel (within `temporal_radius`) in
+  all frames of the window.
+- Reconstruction: a temporal step (the centre frame's bins attend over the window's bins with the noisy values
+  as values, a kernel like every other: linear in the noisy values), then the single-frame spatial multi-scale
+  reconstruction on the centre frame.
+
+A window of one frame skips the T-Mix blocks and the temporal step, so a cross-frame model with one frame is the
+single-frame model it was initialised from (`from_single`): the new one-hot inputs start with zero weights and
+the T-Mix output projections start at zero (identity blocks).
+"""
+
+from __future__ import annotations
+
+import torch
+from torch import nn
+
+from ..rana import concat_frames
+from .config import ModelConfig
+from .inputs import ModelInputs
+from .layers import Layout, MultiHeadRaNA
+from .ranad import RaNAD
+from .reconstruction import KernelAttention
+
+MAX_OFFSET = 3                       # frames -3..+3 around the centre (windows up to 7)
+FRAME_FEATURES = 2 * MAX_OFFSET + 1
+
+
+def temporal_layout(layouts: list) -> tuple[Layout, torch.Tensor]:
+    """(the window's bins per pixel frame after frame as one key layout, gather rows into cat(frames))."""
+    offsets, gather, _ = concat_frames([l.offsets for l in layouts])
+    return Layout.of(offsets, layouts[0].height, layouts[0].width), gather
+
+
+def with_frame_id(inputs: ModelInputs, offset: int) -> torch.Tensor:
+    onehot = torch.zeros(inputs.features.shape[0], FRAME_FEATURES)
+    onehot[:, offset + MAX_OFFSET] = 1
+    return torch.cat([inputs.features, onehot], 1)
+
+
+class TemporalMix(nn.Module):
+    """T-Mix: pre-norm multi-head RaNA from every bin to the window's bins at (and around) its pixel."""
+
+    def __init__(self, dim: int, heads: int, head_dim: int, radius: float, backend: str = "auto"):
+        super().__init__()
+        self.norm = nn.LayerNorm(dim)
+        self.attn = MultiHeadRaNA(dim, dim, dim, heads, head_dim, radius, backend)
+        nn.init.zeros_(self.attn.out.weight)
+        nn.init.zeros_(self.attn.out.bias)
+
+    def forward(self, feats: list, layouts: list, keys: Layout, gather: torch.Tensor) -> list:
+        allf = torch.cat(feats)
+        x = self.norm(allf)
+        q_pixels = torch.cat([l.pixels for l in layouts])
+        out = allf + self.attn(x, x[gather], q_pixels, keys)
+        return list(torch.split(out, [f.shape[0] for f in feats]))
+
+
+class CrossFrameRaNAD(nn.Module):
+    def __init__(self, config: ModelConfig, in_dim: int, backend: str = "auto"):
+        super().__init__()
+        self.config = config
+        self.single = RaNAD(config, in_dim + FRAME_FEATURES, backend)
+        c = config
+        self.tmix = nn.ModuleList(TemporalMix(c.dim, c.heads, c.head_dim, c.temporal_radius, backend)
+                                  for _ in range(c.unets))
+        self.temporal = nn.ModuleDict({name: KernelAttention(c.dim, r.heads, r.head_dim, c.temporal_radius, backend)
+                                       for name, r in c.recon.items()})
+        # per-bin share of the temporal result (a function of the features only, so the output stays linear in
+        # the values); starts near 0: training begins from the single-frame behaviour
+        self.temporal_gate = nn.ModuleDict({name: nn.Linear(c.dim, 1) for name in c.recon})
+        for g in self.temporal_gate.values():
+            nn.init.zeros_(g.weight)
+            nn.init.constant_(g.bias, -4.0)
+
+    @classmethod
+    def from_single(cls, single: RaNAD, config: ModelConfig, in_dim: int) -> "CrossFrameRaNAD":
+        """A cross-frame model that starts as `single` (its weights copied, the frame one-hot weights zero)."""
+        model = cls(config, in_dim)
+        state = single.state_dict()
+        w = state["embed.0.weight"]
+        state["embed.0.weight"] = torch.cat([w, w.new_zeros(w.shape[0], FRAME_FEATURES)], 1)
+        model.single.load_state_dict(state)
+        return model
+
+    def embeddings(self, frames: list, centre: int) -> list:
+        """Per-frame backbone embeddings of the window (inputs of every frame on the centre frame's grid)."""
+        layouts = [f.layout for f in frames]
+        feats = [self.single.embed(with_frame_id(f, i - centre)) for i, f in enumerate(frames)]
+        keys, gather = temporal_layout(layouts) if len(frames) > 1 else (None, None)
+        for k, unet in enumerate(self.single.backbone.unets):
+            feats = [unet(f, l) for f, l in zip(feats, layouts)]
+            if len(frames) > 1:
+                feats = self.tmix[k](feats, layouts, keys, gather)
+        return feats
+
+    def reconstruct(self, feats: list, frames: list, centre: int, values: dict | None = None) -> dict:
+        """Denoised layers of the centre frame; `values` (name -> per-frame [N_f, C] list) replaces the noisy
+        layers, which is how AOVs reuse the kernels."""
+        c = frames[centre]
+        out = {}
+        keys, gather = temporal_layout([f.layout for f in frames]) if len(frames) > 1 else (None, None)
+        for name, rec in self.single.recon.items():
+            if name not in c.layers:
+                continue
+            vals = values[name] if values is not None else [f.layers[name] for f in frames]
+            v = vals[centre]
+            if len(frames) > 1:
+                allv = torch.cat(vals)[gather]
+                allf = torch.cat(feats)[gather]
+                t = self.temporal[name](feats[centre], allf, c.layout.pixels, keys, allv)
+                g = torch.sigmoid(self.temporal_gate[name](feats[centre]))
+                v = v + g * (t - v)
+            out[name] = rec(feats[centre], c.layout, v)
+        return out
+
+    def forward(self, frames: list, centre: int) -> dict:
+        return self.reconstruct(self.embeddings(frames, centre), frames, centre)
