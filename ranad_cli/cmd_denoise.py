@@ -49,10 +49,13 @@ def parse_bytes(text: str) -> float:
 @click.option("--skip-existing", is_flag=True, help="Skip frames whose output exists (resume a shot).")
 @click.option("--shard", default=None, metavar="I/N", help="Only farm task I of N (frames I, I+N, ...).")
 @click.option("--strict", is_flag=True, help="Fail on NaN/Inf input samples instead of replacing them.")
+@click.option("--window", type=click.IntRange(1, 7), default=None,
+              help="Frames per window for cross-frame models (default: the model's training window, 3; 1 denoises "
+                   "every frame alone).")
 @click.option("--reference", default=None, metavar="PATTERN",
               help="Reference frames (same layout) to report how much closer to them the output got.")
 def denoise_cmd(inputs, output, frames, model, device, threads, kind, maps, keep_noisy, tile, halo, max_memory,
-                cache_dir, skip_existing, shard, strict, reference):
+                cache_dir, skip_existing, shard, strict, window, reference):
     """Denoise deep EXR INPUTS (files or patterns such as beauty.####.exr) into deep EXRs with the same pixels,
     bins, bin order, channels, ids and header: diffuse, specular, alpha and depth are denoised and the beauty
     is rebuilt from them.
@@ -78,9 +81,8 @@ def denoise_cmd(inputs, output, frames, model, device, threads, kind, maps, keep
     if threads:
         torch.set_num_threads(threads)
     overrides = parse_overrides(maps)
-    frames_list = expand_inputs(list(inputs), frames)
-    if shard:
-        frames_list = take_shard(frames_list, shard)
+    sequence = expand_inputs(list(inputs), frames)
+    frames_list = take_shard(sequence, shard) if shard else sequence
     if is_pattern(output) or not output.endswith((os.sep, "/")):
         _make_folder(os.path.dirname(os.path.abspath(output)), output)
     else:
@@ -101,7 +103,8 @@ def denoise_cmd(inputs, output, frames, model, device, threads, kind, maps, keep
     click.echo(f"model {loaded.model_id}; {'deep-OID' if (kind if kind != 'auto' else detected) == 'deepoid' else 'deep-Z'}"
                f" input; channels: {mapping.mode()}", err=True)
     opts = ShotOptions(model_spec=model, overrides=overrides, tile=tile, halo=halo, max_memory=budget,
-                       keep_noisy=keep_noisy, cache_dir=cache_dir, skip_existing=skip_existing, strict=strict)
+                       keep_noisy=keep_noisy, cache_dir=cache_dir, skip_existing=skip_existing, strict=strict,
+                       window=window or 3)
     scores = []
 
     def on_frame(job, img, result):
@@ -120,7 +123,7 @@ def denoise_cmd(inputs, output, frames, model, device, threads, kind, maps, keep
 
     with tqdm(total=len(jobs), desc="frames", unit="frame", disable=len(jobs) <= 1, position=0) as fbar, \
             tqdm(desc="tiles", unit="tile", leave=False, position=1) as tbar:
-        summary = denoise_shot(jobs, loaded, opts, fbar.update, _TileBar(tbar), on_frame)
+        summary = denoise_shot(jobs, loaded, opts, fbar.update, _TileBar(tbar), on_frame, sequence)
     for msg in summary.messages:
         click.echo(f"ranad: warning: {msg}", err=True)
     click.echo(f"denoised {summary.frames} frame(s), {summary.bins} bins, in {summary.seconds:.1f} s"

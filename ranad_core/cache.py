@@ -3,12 +3,15 @@
 One file per frame, `DIR/<output name>.ranadcache` (safetensors), holding what the reconstruction modules need
 to rerun on other values:
 
-- tensors: `embeddings` float16 [N, dim] (the backbone's per-bin output, bins sorted front to back),
-  `perm` int64 [N] (sorted row i is file row perm[i]), `offsets` int64 [H*W+1], `z_stats` float64 [2] (the
-  depth standardisation used);
+- tensors, for every frame k of the window the frame was denoised with (k = 0 only for single-frame models):
+  `embeddings.k` float16 [N_k, dim] (the backbone's per-bin output, bins sorted front to back, neighbours
+  motion-compensated onto the centre frame), `perm.k` int64 [N_k] (sorted row i is row perm[i] of the
+  compensated frame; for the centre frame, of the file), `offsets.k` int64 [H*W+1], `z_stats` float64 [K, 2]
+  (the depth standardisation used per frame);
 - metadata (strings): `format` ("ranad-cache/1"), `model_id` (name@sha256 prefix of the weights), `model`
-  (what --model resolved to), `input` (absolute path of the denoised file), `frame`, `layout_sha`
-  (fingerprint of the bin layout and depths: SHA-256 of offsets and Z), `mapping` (JSON of the channel map),
+  (what --model resolved to), `input` (absolute path of the denoised file), `window` (JSON list of the
+  window's input paths), `centre` (index of the denoised frame in it), `frame`, `layout_sha` (fingerprint
+  of the centre's bin layout and depths: SHA-256 of offsets and Z), `mapping` (JSON of the channel map),
   `tile`, `halo`.
 
 A cache is refused when its format, model id or layout fingerprint does not match what it is used with.
@@ -47,14 +50,17 @@ def cache_path(folder: str, output: str) -> str:
 
 
 def write_cache(path: str, img: DeepImage, result, model_id: str, model_spec: str, input_path: str,
-                frame: int | None, tile: int, halo: int) -> None:
+                frame: int | None, tile: int, halo: int, window_paths: list | None = None) -> None:
     from safetensors.numpy import save_file
 
-    tensors = {"embeddings": np.ascontiguousarray(result.embeddings, np.float16),
-               "perm": np.ascontiguousarray(result.perm, np.int64),
-               "offsets": np.ascontiguousarray(img.offsets, np.int64),
-               "z_stats": np.asarray(result.z_stats, np.float64)}
+    tensors = {"z_stats": np.asarray(result.z_stats, np.float64).reshape(-1, 2)}
+    for k, (emb, perm, offs) in enumerate(zip(result.embeddings, result.perms, result.offsets)):
+        tensors[f"embeddings.{k}"] = np.ascontiguousarray(emb, np.float16)
+        tensors[f"perm.{k}"] = np.ascontiguousarray(perm, np.int64)
+        tensors[f"offsets.{k}"] = np.ascontiguousarray(offs, np.int64)
+    window = [os.path.abspath(p) for p in (window_paths or [input_path])]
     meta = {"format": FORMAT, "model_id": model_id, "model": model_spec, "input": os.path.abspath(input_path),
+            "window": json.dumps(window), "centre": str(result.centre),
             "frame": "" if frame is None else str(frame), "layout_sha": layout_fingerprint(img),
             "mapping": json.dumps(result.mapping.describe()), "tile": str(tile), "halo": str(halo)}
     with atomic_output(path) as tmp:

@@ -38,23 +38,42 @@ class FrameResult:
     bins: int
     nonfinite: int                       # bins that had a non-finite value in a channel the model reads
     tiles: int
-    embeddings: np.ndarray | None = None  # [N, dim] float16, sorted bin order (for the AOV cache)
-    perm: np.ndarray | None = None        # sort permutation (sorted row i is file row perm[i])
-    z_stats: tuple = (0.0, 1.0)
+    embeddings: list | None = None       # per window frame: [N_f, dim] float16, sorted bin order (AOV cache)
+    perms: list | None = None            # per window frame: sort permutation of its (compensated) bins
+    z_stats: list = field(default_factory=list)   # per window frame: (mean, std) of log depth
+    offsets: list = field(default_factory=list)   # per window frame: offsets of its compensated bins
     mapping: ChannelMap | None = None
-    extra: dict = field(default_factory=dict)
+    dropped: int = 0                     # neighbour bins that motion carried out of the frame
+
+    @property
+    def perm(self):
+        return None if self.perms is None else self.perms[self.centre]
+
+    centre: int = 0
+
+
+def is_cross_frame(model) -> bool:
+    return getattr(model.config, "window", 1) > 1
 
 
 def receptive_field(model) -> int:
     """An upper bound, in pixels, of how far a bin's output can depend on other pixels: the sum of the radii of
-    the backbone's attention ops (all on one path) plus the deepest reconstruction path (its down-sampling
-    chain and the widest per-scale kernel)."""
+    the backbone's attention ops (all on one path, T-Mix blocks included) plus the deepest reconstruction path
+    (the temporal step, its down-sampling chain and the widest per-scale kernel)."""
     from .model.layers import MultiHeadRaNA
 
-    rf = sum(m.radius for m in model.backbone.modules() if isinstance(m, MultiHeadRaNA))
-    rec = max((sum(d.radius for d in r.down) + max(p.radius for p in r.per_scale) for r in model.recon.values()),
+    core = model.single if is_cross_frame(model) else model
+    rf = sum(m.radius for m in model.modules() if isinstance(m, MultiHeadRaNA) and not _in_recon(model, m))
+    rec = max((sum(d.radius for d in r.down) + max(p.radius for p in r.per_scale) for r in core.recon.values()),
               default=0.0)
+    if is_cross_frame(model):
+        rec += model.config.temporal_radius
     return int(math.ceil(rf + rec))
+
+
+def _in_recon(model, module) -> bool:
+    core = model.single if is_cross_frame(model) else model
+    return any(module is m for m in core.recon.modules())
 
 
 def halo_for(model) -> int:
@@ -83,12 +102,14 @@ def window_bins(offsets: np.ndarray, width: int, win) -> tuple[np.ndarray, np.nd
     return idx.astype(np.int64), local
 
 
-def choose_tile(offsets: np.ndarray, width: int, height: int, halo: int, budget_bytes: float) -> int:
-    """The largest aligned tile whose haloed windows all fit the memory budget (at least ALIGN)."""
+def choose_tile(offsets: np.ndarray, width: int, height: int, halo: int, budget_bytes: float,
+                frames: int = 1) -> int:
+    """The largest aligned tile whose haloed windows all fit the memory budget (at least ALIGN); `frames`
+    windows of frames share the budget."""
     counts = np.diff(offsets).reshape(height, width)
     integral = np.zeros((height + 1, width + 1), np.int64)
     integral[1:, 1:] = counts.cumsum(0).cumsum(1)
-    limit = max(1, int(budget_bytes // BYTES_PER_BIN))
+    limit = max(1, int(budget_bytes // (BYTES_PER_BIN * frames)))
     tile = ALIGN * max(1, math.ceil(max(width, height) / ALIGN))
     while tile > ALIGN:
         worst = max(integral[y1 + 1, x1 + 1] - integral[y0, x1 + 1] - integral[y1 + 1, x0] + integral[y0, x0]
@@ -115,56 +136,106 @@ def _fix_nonfinite(img: DeepImage) -> tuple[DeepImage, int]:
     return img.with_values(vals), n
 
 
-def denoise_frame(model, img: DeepImage, mapping: ChannelMap | None = None, tile: int | None = None,
-                  halo: int | None = None, keep_noisy: str | None = None, want_embeddings: bool = False,
-                  progress=None) -> FrameResult:
-    """Denoise one frame. `tile`: tile size in pixels (None: the whole frame as one tile); `halo`: None for the
-    model's receptive field; `keep_noisy`: a prefix under which the noisy versions of the replaced channels are
-    kept; `progress(n)` is called per tile."""
-    mapping = mapping or detect(img)
+@dataclass
+class _Frame:
+    """One frame of a window as the model reads it: canonical, sorted, with its residual and depth stats."""
+    srt: DeepImage
+    perm: np.ndarray
+    residual: np.ndarray | None
+    stats: tuple
+    nonfinite: int
+
+
+def _model_frame(img: DeepImage, mapping: ChannelMap) -> _Frame:
     canon, residual = canonical(img, mapping)
     canon, nonfinite = _fix_nonfinite(canon)
     if residual is not None:
         residual = np.nan_to_num(residual, nan=0.0, posinf=0.0, neginf=0.0)
     srt, perm = canon.sorted()
-    res_sorted = residual[perm] if residual is not None else None
-    n = srt.num_bins
-    h, w = srt.height, srt.width
+    return _Frame(srt, perm, residual[perm] if residual is not None else None, depth_stats(srt), nonfinite)
+
+
+def _tile_inputs(fr: _Frame, win, width: int):
+    idx, local = window_bins(fr.srt.offsets, width, win)
+    sub = DeepImage(values=fr.srt.values[idx], offsets=local, channels=fr.srt.channels,
+                    data_window=(0, 0, win[2] - win[0], win[3] - win[1]))
+    inputs = prepare(sub, fr.stats)
+    if fr.residual is not None:
+        inputs.layers["diffuse"] = torch.cat([inputs.layers["diffuse"], torch.from_numpy(fr.residual[idx])], 1)
+    return inputs, idx, local
+
+
+def _core_mask(local: np.ndarray, win, core) -> np.ndarray:
+    pix = np.repeat(np.arange(local.size - 1), np.diff(local))
+    wide = win[2] - win[0] + 1
+    py, px = pix // wide + win[1], pix % wide + win[0]
+    return (py >= core[1]) & (py <= core[3]) & (px >= core[0]) & (px <= core[2])
+
+
+def denoise_frame(model, img: DeepImage, mapping: ChannelMap | None = None, tile: int | None = None,
+                  halo: int | None = None, keep_noisy: str | None = None, want_embeddings: bool = False,
+                  progress=None) -> FrameResult:
+    """Denoise one frame on its own (a window of one frame)."""
+    return denoise_window(model, [img], 0, mapping, tile, halo, keep_noisy, want_embeddings, progress)
+
+
+def denoise_window(model, images: list, centre: int, mapping: ChannelMap | None = None, tile: int | None = None,
+                   halo: int | None = None, keep_noisy: str | None = None, want_embeddings: bool = False,
+                   progress=None) -> FrameResult:
+    """Denoise frame `centre` of `images` (a window of consecutive frames; neighbours are motion-compensated onto
+    it). `tile`: tile size in pixels (None: the whole frame); `halo`: None for the model's receptive field;
+    `keep_noisy`: a prefix under which the noisy versions of the replaced channels are kept; `progress(n)` is
+    called per tile. A single-frame model uses the centre frame only."""
+    from .motion import compensate
+
+    cross = is_cross_frame(model)
+    if not cross:
+        images, centre = [images[centre]], 0
+    img = images[centre]
+    mapping = mapping or detect(img)
+    moved, dropped = compensate(images, centre) if len(images) > 1 else (images, 0)
+    frames = [_model_frame(m, mapping) for m in moved]
+    c = frames[centre]
+    n = c.srt.num_bins
+    h, w = c.srt.height, c.srt.width
     halo = halo_for(model) if halo is None else int(math.ceil(halo / ALIGN) * ALIGN)
     tile = max(w, h) if tile is None else max(ALIGN, int(tile) // ALIGN * ALIGN)
-    stats = depth_stats(srt)
     outs: dict = {}
-    emb_all = None
+    embs = [None] * len(frames) if want_embeddings else None
     tiles = 0
     for core, win in tile_windows(w, h, tile, halo):
-        idx, local = window_bins(srt.offsets, w, win)
         tiles += 1
-        if idx.size:
-            sub = DeepImage(values=srt.values[idx], offsets=local, channels=srt.channels,
-                            data_window=(0, 0, win[2] - win[0], win[3] - win[1]))
-            inputs = prepare(sub, stats)
-            if res_sorted is not None:
-                inputs.layers["diffuse"] = torch.cat([inputs.layers["diffuse"], torch.from_numpy(res_sorted[idx])], 1)
+        parts = [_tile_inputs(fr, win, w) for fr in frames]
+        if parts[centre][1].size:
+            window = [p[0] for p in parts]
             with torch.inference_mode():
-                emb = model.embeddings(inputs)
-                pred = {k: m(emb, inputs.layout, inputs.layers[k]) for k, m in model.recon.items()
-                        if k in inputs.layers}
-            pix = np.repeat(np.arange(local.size - 1), np.diff(local))
-            py, px = pix // (win[2] - win[0] + 1) + win[1], pix % (win[2] - win[0] + 1) + win[0]
-            keep = (py >= core[1]) & (py <= core[3]) & (px >= core[0]) & (px <= core[2])
-            dst = idx[keep]
+                if cross:
+                    feats = model.embeddings(window, centre)
+                    pred = model.reconstruct(feats, window, centre)
+                else:
+                    feats = [model.embeddings(window[0])]
+                    pred = {k: m(feats[0], window[0].layout, window[0].layers[k]) for k, m in model.recon.items()
+                            if k in window[0].layers}
+            keep = _core_mask(parts[centre][2], win, core)
+            dst = parts[centre][1][keep]
             for k, v in pred.items():
                 if k not in outs:
                     outs[k] = np.zeros((n, v.shape[1]), np.float32)
                 outs[k][dst] = v.numpy()[keep]
             if want_embeddings:
-                if emb_all is None:
-                    emb_all = np.zeros((n, emb.shape[1]), np.float16)
-                emb_all[dst] = emb.numpy()[keep].astype(np.float16)
+                for f, (fr, (_, idx, local)) in enumerate(zip(frames, parts)):
+                    if embs[f] is None:
+                        embs[f] = np.zeros((fr.srt.num_bins, feats[f].shape[1]), np.float16)
+                    kf = _core_mask(local, win, core)
+                    embs[f][idx[kf]] = feats[f].numpy()[kf].astype(np.float16)
         if progress:
             progress(1)
-    out = _assemble(img, mapping, srt, perm, outs, keep_noisy) if n else img
-    return FrameResult(out, n, nonfinite, tiles, emb_all, perm, stats, mapping)
+    out = _assemble(img, mapping, c.srt, c.perm, outs, keep_noisy) if n else img
+    if want_embeddings:
+        dim = model.config.dim
+        embs = [e if e is not None else np.zeros((fr.srt.num_bins, dim), np.float16) for e, fr in zip(embs, frames)]
+    return FrameResult(out, n, c.nonfinite, tiles, embs, [fr.perm for fr in frames],
+                       [fr.stats for fr in frames], [fr.srt.offsets for fr in frames], mapping, dropped, centre)
 
 
 def _assemble(img: DeepImage, m: ChannelMap, srt: DeepImage, perm: np.ndarray, outs: dict,

@@ -12,7 +12,7 @@ Channel conventions (what `ranad synth` writes, in pixels, x right, y down):
 
 Frames two or more steps away are moved hop by hop: the first hop with the frame's own motion, each further hop
 with the intermediate frame's dominant per-pixel motion at the position reached (the motion of the bin that
-contributes most to that pixel). Bins that leave the frame are dropped and counted. Within a target pixel the
+contributes most to that pixel), or the previous hop's motion again where that pixel is empty. Bins that leave the frame are dropped and counted. Within a target pixel the
 moved bins keep their frame's relative order; the model sorts by depth anyway.
 """
 
@@ -36,8 +36,9 @@ def bin_motion(img: DeepImage, name: str) -> np.ndarray:
 
 
 def dominant_flow(img: DeepImage, name: str) -> np.ndarray:
-    """[H, W, 2] per-pixel motion: the motion of the bin with the largest visible contribution (T_i * alpha_i)."""
-    flow = np.zeros((img.num_pixels, 2), np.float32)
+    """[H, W, 2] per-pixel motion: the motion of the bin with the largest visible contribution (T_i * alpha_i);
+    NaN where the pixel has no bins."""
+    flow = np.full((img.num_pixels, 2), np.nan, np.float32)
     if img.num_bins == 0:
         return flow.reshape(img.height, img.width, 2)
     srt, perm = img.sorted()
@@ -99,14 +100,17 @@ def displacement(frames: list, index: int, centre: int, flows: list | None = Non
         f = per_pixel(index)
         if f is None:
             return np.zeros((n, 2), np.float32)
-        d = f.reshape(-1, 2)[img.pixel_index()]
+        d = np.nan_to_num(f.reshape(-1, 2)[img.pixel_index()])
     y, x = np.divmod(img.pixel_index(), img.width)
-    d = d.astype(np.float64)
+    d = np.nan_to_num(d.astype(np.float64))
+    hop = d.copy()
     for k in range(index + step, centre, step):
         f = per_pixel(k)
         if f is None:
             break
-        d = d + _sample(f, x + d[:, 0], y + d[:, 1])
+        nxt = _sample(f, x + d[:, 0], y + d[:, 1]).astype(np.float64)
+        hop = np.where(np.isnan(nxt), hop, nxt)            # empty pixel: keep moving as before
+        d = d + hop
     return d.astype(np.float32)
 
 

@@ -4,6 +4,10 @@ The loop behind `ranad denoise`: reads a frame, checks it against the first (res
 match across a sequence), denoises it in tiles sized to the memory budget, writes the output (and the AOV
 cache) through a temporary file, and collects a summary. Frames whose output exists are skipped when asked,
 so an interrupted farm task resumes where it stopped.
+
+With a cross-frame model each frame is denoised with a window of its neighbours (consecutive frame numbers of the
+same sequence, up to `window` frames, shorter at the ends of the sequence). The shot is streamed: frames are
+read once and kept only while a window needs them.
 """
 
 from __future__ import annotations
@@ -14,7 +18,7 @@ from dataclasses import dataclass, field
 
 from . import cache as cache_io
 from .channels import detect
-from .denoise import choose_tile, denoise_frame, halo_for
+from .denoise import choose_tile, denoise_window, halo_for, is_cross_frame
 from .errors import RanadError
 from .exr import read_deep, read_header, resolve_part, write_deep
 
@@ -30,6 +34,7 @@ class ShotOptions:
     cache_dir: str | None = None
     skip_existing: bool = False
     strict: bool = False                             # non-finite samples: error instead of fix
+    window: int = 1                                  # frames per window (cross-frame models only)
 
 
 @dataclass
@@ -61,13 +66,56 @@ def frame_memory(img) -> float:
     return 6.0 * img.values.nbytes + 64.0 * img.num_bins
 
 
-def denoise_shot(jobs, loaded, opts: ShotOptions, frame_bar=None, tile_bar=None, on_frame=None) -> ShotSummary:
-    """jobs: [(Frame, output path)]; loaded: model.store.LoadedModel. `frame_bar`/`tile_bar`: callables
-    (n) for progress; `tile_bar.reset(total)` is called per frame when present. `on_frame(job, image, result)`
-    is called after each frame is written."""
+def window_of(frame, sequence: list, window: int) -> tuple[list, int]:
+    """(the frames of `frame`'s window in `sequence`, the index of `frame` in it): consecutive frame numbers
+    only, at most (window-1)/2 on each side."""
+    if window <= 1 or frame.frame is None:
+        return [frame], 0
+    by_number = {f.frame: f for f in sequence if f.frame is not None}
+    half = (window - 1) // 2
+    before = []
+    for k in range(1, half + 1):
+        f = by_number.get(frame.frame - k)
+        if f is None:
+            break
+        before.insert(0, f)
+    after = []
+    for k in range(1, half + 1):
+        f = by_number.get(frame.frame + k)
+        if f is None:
+            break
+        after.append(f)
+    return before + [frame] + after, len(before)
+
+
+class FrameStore:
+    """Frames read once and kept while a window may still need them (the shot is processed in order)."""
+
+    def __init__(self, keep: int):
+        self.keep, self.images = max(1, keep), {}
+
+    def get(self, frame):
+        img = self.images.pop(frame.path, None)
+        if img is None:
+            img = read_deep(frame.path)
+        self.images[frame.path] = img
+        while len(self.images) > self.keep:
+            self.images.pop(next(iter(self.images)))
+        return img
+
+
+def denoise_shot(jobs, loaded, opts: ShotOptions, frame_bar=None, tile_bar=None, on_frame=None,
+                 sequence: list | None = None) -> ShotSummary:
+    """jobs: [(Frame, output path)]; loaded: model.store.LoadedModel; `sequence`: every frame of the shot (the
+    neighbours of a shard's frames; default: the jobs' frames). `frame_bar`/`tile_bar`: callables (n) for
+    progress; `tile_bar.reset(total)` is called per frame when present. `on_frame(job, image, result)` is called
+    after each frame is written."""
     summary = ShotSummary()
     model = loaded.model
     halo = halo_for(model) if opts.halo is None else opts.halo
+    window = opts.window if is_cross_frame(model) else 1
+    sequence = sequence or [f for f, _ in jobs]
+    store = FrameStore(window + 1)
     first = None
     for frame, out in jobs:
         t0 = time.perf_counter()
@@ -76,20 +124,26 @@ def denoise_shot(jobs, loaded, opts: ShotOptions, frame_bar=None, tile_bar=None,
             if frame_bar:
                 frame_bar(1)
             continue
-        img = read_deep(frame.path)
+        members, centre = window_of(frame, sequence, window)
+        images = [store.get(f) for f in members]
+        img = images[centre]
         if first is None:
             first = (frame.path, img.data_window)
         elif img.data_window != first[1]:
             raise RanadError(f"data window {img.data_window} differs from {first[1]} of {first[0]} "
                              "(frames of a sequence must match)", frame.path)
         mapping = detect(img, opts.overrides, frame.path)
+        for f, other in zip(members, images):
+            if other.data_window != img.data_window:
+                raise RanadError(f"data window {other.data_window} differs from {img.data_window} of {frame.path} "
+                                 "(frames of a sequence must match)", f.path)
         tile = opts.tile or choose_tile(img.offsets, img.width, img.height, halo,
-                                        max(opts.max_memory - frame_memory(img), 256e6))
+                                        max(opts.max_memory - len(images) * frame_memory(img), 256e6), len(images))
         ntiles = sum(1 for _ in range(0, img.height, tile)) * sum(1 for _ in range(0, img.width, tile))
         if tile_bar is not None and hasattr(tile_bar, "reset"):
             tile_bar.reset(ntiles)
-        result = denoise_frame(model, img, mapping, tile, halo, opts.keep_noisy, opts.cache_dir is not None,
-                               tile_bar)
+        result = denoise_window(model, images, centre, mapping, tile, halo, opts.keep_noisy,
+                                opts.cache_dir is not None, tile_bar)
         if result.nonfinite:
             msg = f"{frame.path}: {result.nonfinite} bin(s) with NaN/Inf values"
             if opts.strict:
@@ -98,7 +152,8 @@ def denoise_shot(jobs, loaded, opts: ShotOptions, frame_bar=None, tile_bar=None,
         write_deep(out, result.image)
         if opts.cache_dir:
             cache_io.write_cache(cache_io.cache_path(opts.cache_dir, out), img, result, loaded.model_id,
-                                 opts.model_spec or "", frame.path, frame.frame, tile, halo)
+                                 opts.model_spec or "", frame.path, frame.frame, tile, halo,
+                                 [m.path for m in members] if is_cross_frame(model) else None)
         summary.frames += 1
         summary.bins += result.bins
         summary.nonfinite += result.nonfinite

@@ -174,8 +174,9 @@ def test_cache_is_written_and_refused_when_stale(tmp_path, model_file):
     path = cache_io.cache_path(str(cache), str(out))
     tensors, meta = cache_io.read_cache(path)
     img = read_deep(FRAME)
-    assert tensors["embeddings"].shape == (img.num_bins, 16) and tensors["embeddings"].dtype == np.float16
-    np.testing.assert_array_equal(tensors["offsets"], img.offsets)
+    assert tensors["embeddings.0"].shape == (img.num_bins, 16) and tensors["embeddings.0"].dtype == np.float16
+    np.testing.assert_array_equal(tensors["offsets.0"], img.offsets)
+    assert meta["centre"] == "0" and "embeddings.1" not in tensors
     assert meta["input"] == os.path.abspath(FRAME) and meta["model_id"].startswith("tiny@")
     cache_io.check_cache(meta, path, meta["model_id"], img)
     with pytest.raises(RanadError, match="made with model"):

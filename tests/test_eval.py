@@ -92,8 +92,13 @@ def test_weights_round_trip_and_denoise_keeps_the_layout(tmp_path):
     alpha = out_a.channel("A")
     assert alpha.min() >= 0 and alpha.max() <= 1 and np.isfinite(out_a.values).all()
     ch = img.channels
-    rgb = sum(out_a.values[:, [ch.index(f"{l}.{c}") for c in "RGB"]] for l in ("diffuse", "specular", "emission"))
-    np.testing.assert_allclose(out_a.values[:, [ch.index(c) for c in "RGB"]], rgb, rtol=1e-5, atol=1e-6)
+    def layers_sum(im):
+        return sum(im.values[:, [ch.index(f"{l}.{c}") for c in "RGB"]] for l in ("diffuse", "specular", "emission"))
+
+    # the beauty is rebuilt from its layers plus the denoised residual (a convex mix of the noisy residuals)
+    residual = np.abs(img.values[:, [ch.index(c) for c in "RGB"]] - layers_sum(img)).max()
+    np.testing.assert_allclose(out_a.values[:, [ch.index(c) for c in "RGB"]], layers_sum(out_a), rtol=0,
+                               atol=residual * 1.001 + 1e-6)
     untouched = [c for c in ch if c.split(".")[0] in ("albedo", "N", "emission", "lg_key", "coverage")]
     np.testing.assert_array_equal(out_a.select(untouched).values, img.select(untouched).values)
 

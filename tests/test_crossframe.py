@@ -1,0 +1,151 @@
+"""Cross-frame denoising: motion compensation moves bins exactly, windows shrink at sequence ends, and the
+cross-frame model with one frame is the single-frame model it starts from."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import torch
+from click.testing import CliRunner
+
+from deep_factory import random_deep
+from ranad_cli.main import cli
+from ranad_core import cache as cache_io
+from ranad_core.denoise import denoise_window, receptive_field
+from ranad_core.exr import read_deep
+from ranad_core.exr.sequence import Frame
+from ranad_core.model import RaNAD, feature_dim, get_config, prepare
+from ranad_core.model.crossframe import CrossFrameRaNAD
+from ranad_core.motion import FLOW_CHANNELS, compensate, displacement, rebucket
+from ranad_core.shot import window_of
+
+SHOT = Path(__file__).resolve().parents[1] / "examples" / "synth_shot"
+CHANNELS = ("R", "G", "B", "A", "Z") + FLOW_CHANNELS
+
+
+def moving(dx: float, dy: float, seed=0, w=13, h=9):
+    img = random_deep(w, h, max_bins=3, seed=seed, ids=("id",), channels=CHANNELS,
+                      types={c: "float" for c in FLOW_CHANNELS})
+    vals = img.values.copy()
+    for name, (x, y) in {"motion_next": (dx, dy), "motion_prev": (-dx, -dy)}.items():
+        vals[:, img.channels.index(f"{name}.X")] = x
+        vals[:, img.channels.index(f"{name}.Y")] = y
+    return img.with_values(vals)
+
+
+def test_exact_motion_reproduces_the_shifted_image():
+    img = moving(3.2, -1.9)                         # rounds to (3, -2)
+    centre = moving(0, 0, seed=1)
+    (moved, same), dropped = compensate([img, centre], 1)
+    assert same is centre
+    w, h = img.width, img.height
+    expect_drop = 0
+    for y in range(h):
+        for x in range(w):
+            src = img.values[img.offsets[y * w + x]:img.offsets[y * w + x + 1]]
+            tx, ty = x + 3, y - 2
+            if 0 <= tx < w and 0 <= ty < h:
+                p = ty * w + tx
+                np.testing.assert_array_equal(moved.values[moved.offsets[p]:moved.offsets[p + 1]], src)
+            else:
+                expect_drop += len(src)
+    assert dropped == expect_drop > 0
+    # the ids travel with their bins
+    kept = np.isin(img.ids["id"], moved.ids["id"])
+    assert kept.sum() == img.num_bins - dropped
+
+
+def test_rebucketing_keeps_every_bin_inside_the_frame():
+    img = random_deep(16, 12, max_bins=4, seed=3, ids=())
+    rng = np.random.default_rng(0)
+    y, x = np.divmod(img.pixel_index(), img.width)
+    d = rng.uniform(-3, 3, (img.num_bins, 2)).astype(np.float32)
+    d[:, 0] = np.clip(x + d[:, 0], 0, img.width - 1) - x     # stays inside
+    d[:, 1] = np.clip(y + d[:, 1], 0, img.height - 1) - y
+    out, dropped = rebucket(img, d)
+    assert dropped == 0 and out.num_bins == img.num_bins
+    key = lambda v: np.sort(v.view(np.uint32), axis=0)  # noqa: E731
+    np.testing.assert_array_equal(key(out.values), key(img.values))
+
+
+def test_distant_frames_move_hop_by_hop():
+    frames = [moving(1.0, 0.0, seed=s) for s in range(3)]
+    d = displacement(frames, 0, 2)
+    np.testing.assert_allclose(d, np.tile([2.0, 0.0], (frames[0].num_bins, 1)))
+    d = displacement(frames, 2, 0)
+    np.testing.assert_allclose(d, np.tile([-2.0, 0.0], (frames[2].num_bins, 1)))
+    plain = random_deep(13, 9, seed=5, ids=())              # no motion channels: no motion
+    assert not displacement([plain, plain], 0, 1).any()
+
+
+def test_windows_shrink_at_the_ends_and_stop_at_gaps():
+    seq = [Frame(f"f.{n}.exr", n) for n in (1, 2, 3, 4, 5, 7, 8)]
+    names = lambda fs: [f.frame for f in fs]  # noqa: E731
+    w, c = window_of(seq[0], seq, 3)
+    assert names(w) == [1, 2] and c == 0
+    w, c = window_of(seq[2], seq, 5)
+    assert names(w) == [1, 2, 3, 4, 5] and c == 2
+    w, c = window_of(seq[4], seq, 5)
+    assert names(w) == [3, 4, 5] and c == 2                  # 6 is missing: the window stops
+    w, c = window_of(seq[5], seq, 7)
+    assert names(w) == [7, 8] and c == 0
+    assert window_of(Frame("single.exr"), seq, 7) == ([Frame("single.exr")], 0)
+
+
+def small_models():
+    torch.manual_seed(0)
+    single = RaNAD(get_config("cpu-small"), feature_dim()).eval()
+    cross = CrossFrameRaNAD.from_single(single, get_config("cpu-small-xf"), feature_dim()).eval()
+    return single, cross
+
+
+def test_one_frame_window_is_the_single_frame_model():
+    single, cross = small_models()
+    img = read_deep(SHOT / "noisy_spp16.0001.exr")
+    a = denoise_window(single, [img], 0).image
+    b = denoise_window(cross, [img], 0).image
+    np.testing.assert_array_equal(a.values, b.values)
+    assert receptive_field(cross) > receptive_field(single)
+    frames = [read_deep(SHOT / f"noisy_spp16.{i:04d}.exr") for i in range(3)]
+    c = denoise_window(cross, frames, 1).image
+    np.testing.assert_array_equal(c.offsets, frames[1].offsets)
+    assert not np.array_equal(c.values, b.values)            # the neighbours do change the result
+
+
+def test_gradients_reach_the_temporal_modules():
+    _, cross = small_models()
+    cross.train()
+    for t in cross.tmix:   # zero-initialised output projections block q/k gradients until the first step
+        torch.nn.init.normal_(t.attn.out.weight, std=0.01)
+    frames = [read_deep(SHOT / f"noisy_spp16.{i:04d}.exr").crop((0, 0, 23, 23)) for i in range(3)]
+    moved, _ = compensate(frames, 1)
+    window = [prepare(f.sorted()[0]) for f in moved]
+    out = cross(window, 1)
+    sum(v.square().mean() for v in out.values()).backward()
+    for name in ("tmix.0.attn.out.weight", "tmix.1.attn.q.weight", "single.embed.0.weight", "temporal.diffuse.q.weight",
+                 "temporal_gate.alpha.bias"):
+        g = dict(cross.named_parameters())[name].grad
+        assert g is not None and g.abs().max() > 0, name
+
+
+def test_denoise_with_a_window_caches_every_frame(tmp_path):
+    from safetensors.torch import save_file
+
+    _, cross = small_models()
+    model = tmp_path / "xf.safetensors"
+    save_file({k: v.contiguous() for k, v in cross.state_dict().items()}, str(model),
+              metadata={"model_config": json.dumps(cross.config.to_dict())})
+    r = CliRunner().invoke(cli, ["denoise", str(SHOT / "noisy_spp16.####.exr"), "-o", str(tmp_path / "d.####.exr"),
+                                 "--model", str(model), "--cache", str(tmp_path / "c")])
+    assert r.exit_code == 0, r.output
+    t, meta = cache_io.read_cache(cache_io.cache_path(str(tmp_path / "c"), str(tmp_path / "d.0001.exr")))
+    assert len(json.loads(meta["window"])) == 3 and meta["centre"] == "1" and "embeddings.2" in t
+    t, meta = cache_io.read_cache(cache_io.cache_path(str(tmp_path / "c"), str(tmp_path / "d.0000.exr")))
+    assert len(json.loads(meta["window"])) == 2 and meta["centre"] == "0"
+    r = CliRunner().invoke(cli, ["denoise", str(SHOT / "noisy_spp16.####.exr"), "-o", str(tmp_path / "e.####.exr"),
+                                 "--model", str(model), "--window", "1", "--cache", str(tmp_path / "c1")])
+    assert r.exit_code == 0, r.output
+    t, meta = cache_io.read_cache(cache_io.cache_path(str(tmp_path / "c1"), str(tmp_path / "e.0001.exr")))
+    assert len(json.loads(meta["window"])) == 1
