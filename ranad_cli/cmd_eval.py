@@ -24,7 +24,13 @@ from .params import int_list
 @click.option("--scenes", default=None, type=click.IntRange(1), help="Only the first N scenes.")
 @click.option("--grid", "grid_pairs", default=4, show_default=True, type=click.IntRange(0),
               help="Rows of the comparison grid (the first pairs evaluated).")
-def eval_cmd(dataset, out, model, spp, kinds, scenes, grid_pairs):
+@click.option("--temporal", is_flag=True,
+              help="Temporal evaluation instead (datasets made with `ranad synth --ref-frames all`): FLIP and "
+                   "temporal error of noisy, OIDN, the single-frame --model and the cross-frame --cross-model.")
+@click.option("--cross-model", default=None, help="Cross-frame model for --temporal (name, file or run).")
+@click.option("--window", default=3, show_default=True, type=click.IntRange(2, 7),
+              help="Frames per window of the cross-frame model in --temporal.")
+def eval_cmd(dataset, out, model, spp, kinds, scenes, grid_pairs, temporal, cross_model, window):
     """Evaluate on DATASET (the output of `ranad synth` with other seeds than the training data): for every
     scene, deep kind and spp, the noisy input, flat OIDN, OIDN then recolour (the studio workflow) and ranad
     are scored against the reference: SMAPE, DSSIM and HDR-FLIP of the flattened beauty; per-bin SMAPE; a
@@ -37,6 +43,8 @@ def eval_cmd(dataset, out, model, spp, kinds, scenes, grid_pairs):
 
     spps = int_list(spp) if spp else None
     loaded = load_model(model)
+    if temporal:
+        return _temporal(dataset, out, loaded, cross_model, spps, kinds, scenes, window)
     total = ev.count_pairs(dataset, spps, kinds, scenes)
     if total == 0:
         raise RanadError("no pairs match the --spp/--kind selection", dataset)
@@ -57,4 +65,31 @@ def eval_cmd(dataset, out, model, spp, kinds, scenes, grid_pairs):
     if result.grid:
         img = ev.grid_image(result)
         write_flat(os.path.join(out, "grid.png"), img, ["R", "G", "B"], (0, 0, img.shape[1] - 1, img.shape[0] - 1))
+    click.echo(table)
+
+
+def _temporal(dataset, out, loaded, cross_spec, spps, kinds, scenes, window):
+    from ranad_core import evaluate as ev
+    from ranad_core.fileutil import atomic_output
+    from ranad_core.model.store import load_model
+
+    if not cross_spec:
+        raise click.UsageError("--temporal needs --cross-model")
+    cross = load_model(cross_spec)
+    if cross.model.config.window <= 1:
+        raise RanadError("not a cross-frame model", cross_spec)
+    found = ev.temporal_scenes(dataset)
+    if not found:
+        raise RanadError("no scene has references on consecutive frames (make it with --ref-frames all)", dataset)
+    os.makedirs(out, exist_ok=True)
+    n = len(found[:scenes] if scenes else found) * len(kinds or ("deepz", "deepoid")) * len(spps or found[0][1]["spp"])
+    with tqdm(total=n, desc="temporal eval", unit="shot") as bar:
+        rows = ev.evaluate_temporal(dataset, loaded.model, cross.model, spps, kinds, scenes, window, bar.update)
+    table = ev.temporal_markdown(rows, f"{loaded.model_id} vs {cross.model_id} (window {window}) on "
+                                       f"{os.path.basename(os.path.normpath(dataset))}, {len({r['scene'] for r in rows})} scenes")
+    with atomic_output(os.path.join(out, "temporal.md")) as tmp:
+        with open(tmp, "w") as f:
+            f.write(table)
+    ev.write_csv(rows, os.path.join(out, "temporal.csv"), ("scene", "kind", "spp", "method", "flip", "temporal",
+                                                           "seconds"))
     click.echo(table)

@@ -27,7 +27,9 @@ from .params import int_list as _int_list
               help="Deep kinds to write (default: both).")
 @click.option("--workers", default=min(2, os.cpu_count() or 1), show_default=True, type=click.IntRange(1),
               help="Scenes rendered in parallel (processes; the cores are shared out between them).")
-def synth_cmd(out, scenes, size, frames, spp, ref_spp, seed, presets, kinds, workers):
+@click.option("--ref-frames", type=click.Choice(["centre", "all"]), default="centre", show_default=True,
+              help="Frames that get a reference: the centre frame (training) or all (temporal evaluation).")
+def synth_cmd(out, scenes, size, frames, spp, ref_spp, seed, presets, kinds, workers, ref_frames):
     """Render SCENES procedural animated scenes: every frame at each noisy spp, and the centre frame's
     reference binned into each noisy image's bins, as deep-Z and deep-OID EXRs with a manifest per scene.
 
@@ -41,7 +43,7 @@ def synth_cmd(out, scenes, size, frames, spp, ref_spp, seed, presets, kinds, wor
     mitsuba()  # fail early, with the install hint, before any folder is made
     cfg = dataset.SynthConfig(out=out, scenes=scenes, size=size, frames=frames, spp=_int_list(spp), ref_spp=ref_spp,
                               seed=seed, presets=tuple(presets) or PRESETS,
-                              kinds=tuple(kinds) or ("deepz", "deepoid"))
+                              kinds=tuple(kinds) or ("deepz", "deepoid"), ref_frames=ref_frames)
     skipped = sum(dataset.is_done(cfg, i) for i in range(scenes))
     try:
         with tqdm(total=scenes - skipped, desc="synth", unit="scene", disable=scenes - skipped <= 1) as bar:

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import csv
 import math
+import os
 import time
 from dataclasses import dataclass, field
 
@@ -118,11 +119,11 @@ def markdown(rows: list, title: str = "") -> str:
     return "\n".join(lines) + "\n"
 
 
-def write_csv(rows: list, path: str) -> None:
+def write_csv(rows: list, path: str, columns=COLUMNS) -> None:
     from .fileutil import atomic_output
 
     with atomic_output(path) as tmp, open(tmp, "w", newline="") as f:
-        w = csv.DictWriter(f, fieldnames=COLUMNS)
+        w = csv.DictWriter(f, fieldnames=columns)
         w.writeheader()
         for r in rows:
             w.writerow({k: (f"{v:.6g}" if isinstance(v, float) else v) for k, v in r.items()})
@@ -140,3 +141,85 @@ def grid_image(result: Result, pad: int = 2) -> np.ndarray:
         for c, img in enumerate(imgs):
             out[r * (h + pad): r * (h + pad) + img.shape[0], c * (w + pad): c * (w + pad) + img.shape[1]] = img
     return out
+
+
+TEMPORAL_METHODS = ("noisy", "oidn", "ranad", "ranad-xf")
+
+
+def temporal_scenes(dataset: str) -> list:
+    """(scene folder, manifest) of scenes with references on at least two consecutive frames."""
+    import json
+    from pathlib import Path
+
+    out = []
+    for manifest in sorted(Path(dataset).glob("scene_*/manifest.json")):
+        m = json.loads(manifest.read_text())
+        refs = m.get("reference_frames", [m["centre_frame"]])
+        if any(f + 1 in refs for f in refs):
+            out.append((manifest.parent, m))
+    return out
+
+
+def evaluate_temporal(dataset: str, single, cross, spps=None, kinds=None, max_scenes: int | None = None,
+                      window: int = 3, progress=None) -> list:
+    """Per scene, kind and spp: FLIP (mean over the referenced frames) and temporal error (consecutive
+    referenced frames) of the noisy input, flat OIDN, the single-frame model and the cross-frame model (each
+    frame denoised with its window of up to `window` frames, shorter at the shot's ends), plus seconds per
+    frame. Rows: dicts with scene, kind, spp, method, flip, temporal, seconds."""
+    from .denoise import denoise_window
+    from .shot import window_of
+    from .exr.sequence import Frame
+
+    scenes = temporal_scenes(dataset)[:max_scenes] if max_scenes else temporal_scenes(dataset)
+    rows = []
+    for folder, m in scenes:
+        refs_at = sorted(m["reference_frames"])
+        for kind in ("deepz", "deepoid"):
+            if kinds and kind not in kinds:
+                continue
+            for spp in m["spp"]:
+                if spps and spp not in spps:
+                    continue
+                seq = [Frame(str(folder / kind / f"noisy_spp{spp}.{f:04d}.exr"), f) for f in range(m["frames"])]
+                if not all(os.path.isfile(f.path) for f in seq):
+                    continue
+                images = [read_deep(f.path) for f in seq]
+                refs = [metrics.flat_rgb(read_deep(folder / kind / f"reference_spp{spp}.{f:04d}.exr"))
+                        for f in refs_at]
+                outs = {k: [] for k in TEMPORAL_METHODS}
+                secs = dict.fromkeys(TEMPORAL_METHODS, 0.0)
+                for f in refs_at:
+                    img = images[f]
+                    outs["noisy"].append(metrics.flat_rgb(img))
+                    t = time.perf_counter()
+                    outs["oidn"].append(oidn_flat(img))
+                    secs["oidn"] += time.perf_counter() - t
+                    t = time.perf_counter()
+                    outs["ranad"].append(metrics.flat_rgb(denoise_window(single, [img], 0).image))
+                    secs["ranad"] += time.perf_counter() - t
+                    members, centre = window_of(seq[f], seq, window)
+                    t = time.perf_counter()
+                    res = denoise_window(cross, [images[x.frame] for x in members], centre)
+                    secs["ranad-xf"] += time.perf_counter() - t
+                    outs["ranad-xf"].append(metrics.flat_rgb(res.image))
+                for method in TEMPORAL_METHODS:
+                    rows.append({"scene": folder.name, "kind": kind, "spp": spp, "method": method,
+                                 "flip": float(np.mean([metrics.flip(r, o) for r, o in zip(refs, outs[method])])),
+                                 "temporal": metrics.temporal_error(outs[method], refs),
+                                 "seconds": secs[method] / len(refs_at)})
+                if progress:
+                    progress(1)
+    return rows
+
+
+def temporal_markdown(rows: list, title: str = "") -> str:
+    cols = ("spp", "method", "n", "flip", "temporal", "seconds")
+    lines = ([f"### {title}", ""] if title else []) + ["| " + " | ".join(cols) + " |", "|" + "---|" * len(cols)]
+    for spp in sorted({r["spp"] for r in rows}):
+        for method in TEMPORAL_METHODS:
+            sel = [r for r in rows if r["spp"] == spp and r["method"] == method]
+            if sel:
+                agg = {"spp": spp, "method": method, "n": len(sel),
+                       **{k: float(np.mean([r[k] for r in sel])) for k in ("flip", "temporal", "seconds")}}
+                lines.append("| " + " | ".join(_fmt(agg[c]) for c in cols) + " |")
+    return "\n".join(lines) + "\n"

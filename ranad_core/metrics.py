@@ -178,3 +178,16 @@ def deep_scores(ref: DeepImage, test: DeepImage, z_split: float | None = None) -
             "comp_flip": flip(ce_ref, ce_test), "comp_smape": smape(ce_ref, ce_test),
             "sep_flip": (flip(f_ref, f_test) + flip(b_ref, b_test)) / 2,
             "sep_smape": (smape(f_ref, f_test) + smape(b_ref, b_test)) / 2}
+
+
+def temporal_error(outputs: list, references: list) -> float:
+    """Mean over consecutive frames of |(o[t+1] - o[t]) - (r[t+1] - r[t])| on tone-mapped [H, W, 3] images:
+    flicker the reference does not have (0 for a perfect sequence; a static error does not count)."""
+    if len(outputs) < 2:
+        return float("nan")
+    errs = []
+    for t in range(len(outputs) - 1):
+        do = tonemap(outputs[t + 1]).astype(np.float64) - tonemap(outputs[t])
+        dr = tonemap(references[t + 1]).astype(np.float64) - tonemap(references[t])
+        errs.append(np.abs(do - dr).mean())
+    return float(np.mean(errs))

@@ -149,3 +149,43 @@ def test_denoise_with_a_window_caches_every_frame(tmp_path):
     assert r.exit_code == 0, r.output
     t, meta = cache_io.read_cache(cache_io.cache_path(str(tmp_path / "c1"), str(tmp_path / "e.0001.exr")))
     assert len(json.loads(meta["window"])) == 1
+
+
+def test_temporal_eval_compares_single_and_cross_frame(tmp_path):
+    """A shot whose frames 0 and 2 use the noisy frame itself as reference (plumbing; frame 1 has a real one)."""
+    import shutil
+
+    import pytest
+
+    pytest.importorskip("pyoidn", reason="the OIDN baseline needs pyoidn (pip install 'ranad[eval]')")
+    pytest.importorskip("flip_evaluator", reason="HDR-FLIP needs flip-evaluator (pip install 'ranad[eval]')")
+    from safetensors.torch import save_file
+
+    scene = tmp_path / "ds" / "scene_0000"
+    (scene / "deepoid").mkdir(parents=True)
+    for f in range(3):
+        shutil.copy(SHOT / f"noisy_spp16.{f:04d}.exr", scene / "deepoid" / f"noisy_spp16.{f:04d}.exr")
+        src = SHOT / (f"reference_spp16.{f:04d}.exr" if f == 1 else f"noisy_spp16.{f:04d}.exr")
+        shutil.copy(src, scene / "deepoid" / f"reference_spp16.{f:04d}.exr")
+    m = json.loads((SHOT / "manifest.json").read_text())
+    m["reference_frames"] = [0, 1, 2]
+    (scene / "manifest.json").write_text(json.dumps(m))
+    single, cross = small_models()
+    paths = {}
+    for name, model in (("single", single), ("cross", cross)):
+        paths[name] = str(tmp_path / f"{name}.safetensors")
+        save_file({k: v.contiguous() for k, v in model.state_dict().items()}, paths[name],
+                  metadata={"model_config": json.dumps(model.config.to_dict())})
+    out = tmp_path / "ev"
+    r = CliRunner().invoke(cli, ["eval", str(tmp_path / "ds"), "-o", str(out), "--temporal", "--model",
+                                 paths["single"], "--cross-model", paths["cross"]])
+    assert r.exit_code == 0, r.output
+    import csv
+
+    rows = {row["method"]: row for row in csv.DictReader(open(out / "temporal.csv"))}
+    assert set(rows) == {"noisy", "oidn", "ranad", "ranad-xf"}
+    assert all(float(rows[k]["temporal"]) >= 0 for k in rows)
+    assert float(rows["ranad-xf"]["seconds"]) > 0 and "| 16 | ranad-xf | 1 |" in r.output
+    r = CliRunner().invoke(cli, ["eval", str(SHOT.parent), "-o", str(out), "--temporal", "--model", paths["single"],
+                                 "--cross-model", paths["cross"]])
+    assert r.exit_code == 2

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import os
+
 import numpy as np
 import pytest
 
@@ -119,13 +121,19 @@ def test_motion_vectors_land_on_same_object(small_dataset):
 
 
 def test_same_seed_same_files(small_dataset, tmp_path):
+    """Same seed, same bytes; references of every frame (--ref-frames all) leave the centre one unchanged."""
     cfg = small_dataset
-    again = dataset.SynthConfig(**{**cfg.__dict__, "out": str(tmp_path / "again"), "scenes": 1})
+    again = dataset.SynthConfig(**{**cfg.__dict__, "out": str(tmp_path / "again"), "scenes": 1, "ref_frames": "all"})
     dataset.run(again)
     for rel in ("deepz/noisy_spp4.0000.exr", "deepoid/reference_spp16.0001.exr"):
         a = open(f"{dataset.scene_dir(cfg, 0)}/{rel}", "rb").read()
         b = open(f"{dataset.scene_dir(again, 0)}/{rel}", "rb").read()
         assert a == b
+    for f in (0, 2):
+        ref = read_deep(f"{dataset.scene_dir(again, 0)}/deepz/reference_spp4.{f:04d}.exr")
+        noisy = read_deep(f"{dataset.scene_dir(again, 0)}/deepz/noisy_spp4.{f:04d}.exr")
+        np.testing.assert_array_equal(ref.offsets, noisy.offsets)
+    assert not os.path.exists(f"{dataset.scene_dir(cfg, 0)}/deepz/reference_spp4.0000.exr")
 
 
 def test_resume_skips_complete_scenes(small_dataset):

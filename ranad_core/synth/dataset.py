@@ -37,6 +37,7 @@ class SynthConfig:
     seed: int = 0
     presets: tuple = PRESETS
     kinds: tuple = ("deepz", "deepoid")
+    ref_frames: str = "centre"        # "centre", or "all" (references for every frame: temporal evaluation)
 
 
 def scene_seed(seed: int, index: int) -> int:
@@ -75,13 +76,13 @@ def make_one(cfg: SynthConfig, index: int) -> dict:
     root = scene_dir(cfg, index)
     files, stats = [], {}
     bins_per_px = {k: [] for k in cfg.kinds}
-    centre_layouts = []  # (kind, spp, layout): the reference is traced once and binned into each
+    ref_frames = list(range(cfg.frames)) if cfg.ref_frames == "all" else [centre]
     for kind_name in cfg.kinds:
         os.makedirs(os.path.join(root, kind_name), exist_ok=True)
+        stats[kind_name] = {"reference_unbinned_energy": {}}
     for frame in range(cfg.frames):
         fs = load_frame(spec, frame)
-        if frame == centre:
-            centre_scene = fs  # the reference traces the same loaded frame
+        layouts = []  # (kind, spp, layout): the frame's reference is traced once and binned into each
         for spp in cfg.spp:
             samples = noisy_samples(spec, frame, spp, sseed + 7919 * frame + spp, fs)
             for kind_name in cfg.kinds:
@@ -91,20 +92,23 @@ def make_one(cfg: SynthConfig, index: int) -> dict:
                 files.append(os.path.relpath(path, root))
                 counts = np.diff(lay.offsets)
                 bins_per_px[kind_name].append(float(counts[counts > 0].mean()) if (counts > 0).any() else 0.0)
-                if frame == centre:
-                    centre_layouts.append((kind_name, spp, lay))
-    refs = render_reference(spec, centre, cfg.ref_spp, [lay for _, _, lay in centre_layouts], sseed + 104729,
-                            centre_scene)
+                if frame in ref_frames:
+                    layouts.append((kind_name, spp, lay))
+        if frame not in ref_frames:
+            continue
+        # the centre frame's seed is the one datasets made before references of every frame existed
+        refs = render_reference(spec, frame, cfg.ref_spp, [lay for _, _, lay in layouts],
+                                sseed + 104729 + 15485863 * (frame - centre), fs)
+        for (kind_name, spp, _), (img, lost) in zip(layouts, refs):
+            path = os.path.join(root, kind_name, f"reference_spp{spp}.{frame:04d}.exr")
+            write_deep(path, img)
+            files.append(os.path.relpath(path, root))
+            key = str(spp) if frame == centre else f"{spp}@{frame}"
+            stats[kind_name]["reference_unbinned_energy"][key] = lost
     for kind_name in cfg.kinds:
-        stats[kind_name] = {"bins_per_covered_pixel": float(np.mean(bins_per_px[kind_name])),
-                            "reference_unbinned_energy": {}}
-    for (kind_name, spp, _), (img, lost) in zip(centre_layouts, refs):
-        path = os.path.join(root, kind_name, f"reference_spp{spp}.{centre:04d}.exr")
-        write_deep(path, img)
-        files.append(os.path.relpath(path, root))
-        stats[kind_name]["reference_unbinned_energy"][str(spp)] = lost
+        stats[kind_name]["bins_per_covered_pixel"] = float(np.mean(bins_per_px[kind_name]))
     manifest = {"scene": index, "seed": sseed, "preset": preset, "size": cfg.size, "frames": cfg.frames,
-                "centre_frame": centre, "spp": list(cfg.spp), "ref_spp": cfg.ref_spp,
+                "centre_frame": centre, "reference_frames": ref_frames, "spp": list(cfg.spp), "ref_spp": cfg.ref_spp,
                 "light_groups": spec.light_groups, "objects": len(spec.objects), "files": files, "stats": stats,
                 "seconds": round(time.perf_counter() - t0, 2)}
     with atomic_output(os.path.join(root, "manifest.json")) as tmp:
