@@ -52,10 +52,13 @@ def parse_bytes(text: str) -> float:
 @click.option("--window", type=click.IntRange(1, 7), default=None,
               help="Frames per window for cross-frame models (default: the model's training window, 3; 1 denoises "
                    "every frame alone).")
+@click.option("--aovs", default=None, metavar="PATTERN",
+              help="Also denoise the AOV layers matching PATTERN (e.g. 'lg_*') in the same files, reusing the "
+                   "beauty's kernels (see `ranad aov`).")
 @click.option("--reference", default=None, metavar="PATTERN",
               help="Reference frames (same layout) to report how much closer to them the output got.")
 def denoise_cmd(inputs, output, frames, model, device, threads, kind, maps, keep_noisy, tile, halo, max_memory,
-                cache_dir, skip_existing, shard, strict, window, reference):
+                cache_dir, skip_existing, shard, strict, window, aovs, reference):
     """Denoise deep EXR INPUTS (files or patterns such as beauty.####.exr) into deep EXRs with the same pixels,
     bins, bin order, channels, ids and header: diffuse, specular, alpha and depth are denoised and the beauty
     is rebuilt from them.
@@ -104,7 +107,7 @@ def denoise_cmd(inputs, output, frames, model, device, threads, kind, maps, keep
                f" input; channels: {mapping.mode()}", err=True)
     opts = ShotOptions(model_spec=model, overrides=overrides, tile=tile, halo=halo, max_memory=budget,
                        keep_noisy=keep_noisy, cache_dir=cache_dir, skip_existing=skip_existing, strict=strict,
-                       window=window or 3)
+                       window=window or 3, aovs=aovs)
     scores = []
 
     def on_frame(job, img, result):

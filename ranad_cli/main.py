@@ -70,7 +70,8 @@ def cli(ctx: click.Context, io_mode: str, debug: bool) -> None:
     exr.set_io_mode(io_mode)
 
 
-from .cmd_denoise import denoise_cmd  # noqa: E402  (commands import nothing from this module)
+from .cmd_aov import aov_cmd  # noqa: E402  (commands import nothing from this module)
+from .cmd_denoise import denoise_cmd  # noqa: E402
 from .cmd_eval import eval_cmd  # noqa: E402
 from .cmd_export import export_cmd  # noqa: E402
 from .cmd_flatten import flatten_cmd  # noqa: E402
@@ -84,6 +85,7 @@ cli.add_command(synth_cmd)
 cli.add_command(train_cmd)
 cli.add_command(eval_cmd)
 cli.add_command(denoise_cmd)
+cli.add_command(aov_cmd)
 cli.add_command(export_cmd)
 
 

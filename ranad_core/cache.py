@@ -12,7 +12,7 @@ to rerun on other values:
   (what --model resolved to), `input` (absolute path of the denoised file), `window` (JSON list of the
   window's input paths), `centre` (index of the denoised frame in it), `frame`, `layout_sha` (fingerprint
   of the centre's bin layout and depths: SHA-256 of offsets and Z), `mapping` (JSON of the channel map),
-  `tile`, `halo`.
+  `overrides` (JSON of the --map overrides, so `ranad aov` maps the channels the same way), `tile`, `halo`.
 
 A cache is refused when its format, model id or layout fingerprint does not match what it is used with.
 """
@@ -50,7 +50,8 @@ def cache_path(folder: str, output: str) -> str:
 
 
 def write_cache(path: str, img: DeepImage, result, model_id: str, model_spec: str, input_path: str,
-                frame: int | None, tile: int, halo: int, window_paths: list | None = None) -> None:
+                frame: int | None, tile: int, halo: int, window_paths: list | None = None,
+                overrides: dict | None = None) -> None:
     from safetensors.numpy import save_file
 
     tensors = {"z_stats": np.asarray(result.z_stats, np.float64).reshape(-1, 2)}
@@ -62,7 +63,8 @@ def write_cache(path: str, img: DeepImage, result, model_id: str, model_spec: st
     meta = {"format": FORMAT, "model_id": model_id, "model": model_spec, "input": os.path.abspath(input_path),
             "window": json.dumps(window), "centre": str(result.centre),
             "frame": "" if frame is None else str(frame), "layout_sha": layout_fingerprint(img),
-            "mapping": json.dumps(result.mapping.describe()), "tile": str(tile), "halo": str(halo)}
+            "mapping": json.dumps(result.mapping.describe()), "overrides": json.dumps(overrides or {}),
+            "tile": str(tile), "halo": str(halo)}
     with atomic_output(path) as tmp:
         save_file(tensors, tmp, metadata=meta)
 

@@ -209,11 +209,13 @@ def denoise_window(model, images: list, centre: int, mapping: ChannelMap | None 
         if parts[centre][1].size:
             window = [p[0] for p in parts]
             with torch.inference_mode():
+                # embeddings are rounded to float16, the precision of the AOV cache, before the reconstruction,
+                # so `ranad aov` rebuilds exactly these kernels and light groups sum to this beauty
                 if cross:
-                    feats = model.embeddings(window, centre)
+                    feats = [f.half().float() for f in model.embeddings(window, centre)]
                     pred = model.reconstruct(feats, window, centre)
                 else:
-                    feats = [model.embeddings(window[0])]
+                    feats = [model.embeddings(window[0]).half().float()]
                     pred = {k: m(feats[0], window[0].layout, window[0].layers[k]) for k, m in model.recon.items()
                             if k in window[0].layers}
             keep = _core_mask(parts[centre][2], win, core)

@@ -35,6 +35,7 @@ class ShotOptions:
     skip_existing: bool = False
     strict: bool = False                             # non-finite samples: error instead of fix
     window: int = 1                                  # frames per window (cross-frame models only)
+    aovs: str | None = None                          # glob of AOV layers denoised with the same kernels
 
 
 @dataclass
@@ -64,6 +65,22 @@ def frame_memory(img) -> float:
     """Bytes the pipeline holds per frame besides the model's tile work: the decoded frame, its canonical and
     sorted copies, the output and per-layer results (about six copies of the values)."""
     return 6.0 * img.values.nbytes + 64.0 * img.num_bins
+
+
+def with_denoised_aovs(model, images, centre, mapping, result, pattern: str, source: str):
+    """result.image with the AOV layers matching `pattern` replaced by their kernel-reuse denoising."""
+    from .aov import aov_layers, denoise_aovs
+
+    img = images[centre]
+    layers = aov_layers(img.channels, pattern)
+    if not layers:
+        raise RanadError(f"no AOV layers match {pattern!r} (layers with .R/.G/.B channels)", source)
+    out = denoise_aovs(model, images, centre, mapping, layers, result.embeddings, result.perms, result.offsets)
+    vals = result.image.values.copy()
+    for layer, chans in layers.items():
+        for i, c in enumerate(chans):
+            vals[:, result.image.channels.index(c)] = out[layer][:, i]
+    return result.image.with_values(vals)
 
 
 def window_of(frame, sequence: list, window: int) -> tuple[list, int]:
@@ -143,7 +160,9 @@ def denoise_shot(jobs, loaded, opts: ShotOptions, frame_bar=None, tile_bar=None,
         if tile_bar is not None and hasattr(tile_bar, "reset"):
             tile_bar.reset(ntiles)
         result = denoise_window(model, images, centre, mapping, tile, halo, opts.keep_noisy,
-                                opts.cache_dir is not None, tile_bar)
+                                opts.cache_dir is not None or bool(opts.aovs), tile_bar)
+        if opts.aovs:
+            result.image = with_denoised_aovs(model, images, centre, mapping, result, opts.aovs, frame.path)
         if result.nonfinite:
             msg = f"{frame.path}: {result.nonfinite} bin(s) with NaN/Inf values"
             if opts.strict:
@@ -153,7 +172,7 @@ def denoise_shot(jobs, loaded, opts: ShotOptions, frame_bar=None, tile_bar=None,
         if opts.cache_dir:
             cache_io.write_cache(cache_io.cache_path(opts.cache_dir, out), img, result, loaded.model_id,
                                  opts.model_spec or "", frame.path, frame.frame, tile, halo,
-                                 [m.path for m in members] if is_cross_frame(model) else None)
+                                 [m.path for m in members] if is_cross_frame(model) else None, opts.overrides)
         summary.frames += 1
         summary.bins += result.bins
         summary.nonfinite += result.nonfinite

@@ -1,0 +1,117 @@
+"""``ranad aov``: denoise light-group AOVs with the kernels cached by ``ranad denoise --cache``."""
+
+from __future__ import annotations
+
+import glob
+import json
+import os
+
+import click
+from tqdm import tqdm
+
+from ranad_core.errors import RanadError
+
+
+@click.command("aov")
+@click.argument("cache", type=click.Path(exists=True))
+@click.option("--layers", "pattern", required=True, metavar="PATTERN",
+              help="Glob of the AOV layers to denoise, e.g. 'lg_*' (layers with .R/.G/.B channels).")
+@click.option("-o", "--output", required=True,
+              help="Output file, pattern (denoised/aov.####.exr) or folder ending in '/' (created).")
+@click.option("--input", "aov_input", default=None, metavar="FILE_OR_PATTERN",
+              help="Files holding the AOVs, with the beauty's bin layout (default: the denoised beauty inputs "
+                   "recorded in the cache, where light groups usually live).")
+def aov_cmd(cache, pattern, output, aov_input):
+    """Denoise the AOV layers matching PATTERN for every frame cached in CACHE (a folder of .ranadcache files or
+    one file), rerunning only the reconstruction with the cached embeddings: all AOV channels share each RaNA
+    call, and light groups that sum to the noisy beauty sum to the denoised beauty.
+
+    Diffuse-like layers (*diffuse*, *diff*) use the diffuse kernels, specular-like ones (*specular*, *spec*)
+    the specular kernels; any other layer is split in the proportions of the beauty's diffuse, specular and
+    emission components per bin (see ranad_core/aov.py). Outputs keep the AOV file's layout, channels and header.
+    """
+    from ranad_core import cache as cache_io
+    from ranad_core.aov import aov_layers, denoise_aovs
+    from ranad_core.channels import detect
+    from ranad_core.exr import read_deep, write_deep
+    from ranad_core.exr.sequence import Frame, format_frame, is_pattern, output_path
+    from ranad_core.fileutil import check_writable_target
+    from ranad_core.model.store import load_model
+
+    files = sorted(glob.glob(os.path.join(cache, "*" + cache_io.SUFFIX))) if os.path.isdir(cache) else [cache]
+    if not files:
+        raise RanadError(f"no {cache_io.SUFFIX} files (made by ranad denoise --cache)", cache)
+    entries = []
+    for path in files:
+        tensors, meta = cache_io.read_cache(path)
+        entries.append((path, tensors, meta))
+    frames = [int(m["frame"]) if m["frame"] else None for _, _, m in entries]
+    folder = output if output.endswith((os.sep, "/")) and not is_pattern(output) else os.path.dirname(
+        os.path.abspath(output))
+    try:
+        os.makedirs(folder, exist_ok=True)
+    except OSError as e:
+        raise RanadError(f"cannot create the output folder ({e.strerror or e})", output) from None
+
+    def source_of(meta, frame, beauty_path):
+        if not aov_input:
+            return beauty_path
+        if is_pattern(aov_input):
+            if frame is None:
+                raise RanadError("has no frame number to fill the --input pattern", beauty_path)
+            return format_frame(aov_input, frame)
+        return aov_input
+
+    jobs = []
+    for (path, tensors, meta), frame in zip(entries, frames):
+        src = source_of(meta, frame, meta["input"])
+        if not os.path.isfile(src):
+            raise RanadError("AOV file not found", src)
+        out = output_path(output, Frame(src, frame), len(entries))
+        check_writable_target(out)
+        jobs.append((path, tensors, meta, frame, src, out))
+    models = {}
+    with tqdm(total=len(jobs), desc="aov", unit="frame", disable=len(jobs) <= 1) as bar:
+        for path, tensors, meta, frame, src, out in jobs:
+            spec = meta["model"] or None
+            if spec not in models:
+                models[spec] = load_model(spec)
+            loaded = models[spec]
+            cache_io.check_cache(meta, path, loaded.model_id)
+            window = json.loads(meta["window"])
+            centre = int(meta["centre"])
+            beauty = [read_deep(p) for p in window]
+            cache_io.check_cache(meta, path, None, beauty[centre])
+            aov_files = [source_of(meta, None if frame is None else frame - centre + k, p)
+                         for k, p in enumerate(window)]
+            aov_imgs = [read_deep(p) if p != b else b_img for p, b, b_img in zip(aov_files, window, beauty)]
+            layers = aov_layers(aov_imgs[centre].channels, pattern)
+            if not layers:
+                raise RanadError(f"no AOV layers match {pattern!r} (layers with .R/.G/.B channels)", src)
+            combined = []
+            for p, b_img, a_img in zip(aov_files, beauty, aov_imgs):
+                if a_img is b_img:
+                    combined.append(b_img)
+                    continue
+                if not (a_img.offsets.shape == b_img.offsets.shape and (a_img.offsets == b_img.offsets).all()):
+                    raise RanadError("bin layout differs from the denoised beauty's (another render?)", p)
+                names = [c for chans in layers.values() for c in chans]
+                import numpy as np
+
+                cols = np.stack([a_img.channel(c) for c in names], 1)
+                keep = [c for c in b_img.channels if c not in names]
+                base = b_img.select(keep)
+                combined.append(base.with_values(np.concatenate([base.values, cols], 1), keep + names))
+            mapping = detect(beauty[centre], json.loads(meta.get("overrides", "{}")), window[centre])
+            k = len(window)
+            result = denoise_aovs(loaded.model, combined, centre, mapping, layers,
+                                  [tensors[f"embeddings.{i}"] for i in range(k)],
+                                  [tensors[f"perm.{i}"] for i in range(k)], [tensors[f"offsets.{i}"] for i in range(k)])
+            target = aov_imgs[centre]
+            vals = target.values.copy()
+            for layer, chans in layers.items():
+                for i, c in enumerate(chans):
+                    vals[:, target.channels.index(c)] = result[layer][:, i]
+            write_deep(out, target.with_values(vals))
+            bar.update(1)
+    click.echo(f"denoised {len(jobs)} frame(s) of AOVs matching {pattern!r}")

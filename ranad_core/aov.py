@@ -1,0 +1,126 @@
+"""Light-group AOVs denoised with the cached kernels (paper Sec. 6.5.3).
+
+RaNAD's reconstruction applies attention weights to noisy values, so the weights of the primary pass denoise any
+number of AOVs: the cached backbone embeddings are fed to the reconstruction modules again, with all AOV channels
+batched into the value dimension of each RaNA call (the kernels are computed once per scale for all of them).
+
+Which kernels an AOV gets (the rule):
+
+- layers named like a diffuse layer (`*diffuse*`, `*diff*`) use the diffuse kernels, like a specular layer
+  (`*specular*`, `*spec*`) the specular kernels;
+- every other layer (light groups holding both) is split per bin and channel in the proportions of the noisy
+  beauty's own components: the share diffuse/beauty (plus the residual the split leaves out) goes through the
+  diffuse kernels, specular/beauty through the specular kernels, emission/beauty passes through. Since those
+  shares sum to one in every bin, light groups that sum to the noisy beauty give denoised light groups that sum
+  to the denoised beauty (the primary pass rebuilds the beauty from exactly these operators).
+
+With a cross-frame model the AOVs of every frame of the window are motion-compensated like the beauty was and
+go through the same temporal step.
+"""
+
+from __future__ import annotations
+
+import fnmatch
+
+import numpy as np
+import torch
+
+from .channels import ChannelMap, canonical
+from .deep import DeepImage, unsort
+from .errors import RanadError
+from .model.inputs import ModelInputs
+from .model.layers import Layout
+
+MAX_VALUE_CHANNELS = 63          # the RaNA kernels' widest value head is 64 channels
+
+
+def aov_layers(channels, pattern: str) -> dict:
+    """layer name -> its (R, G, B) channel names, for the layers matching the glob `pattern`."""
+    found = {}
+    for c in channels:
+        if "." not in c:
+            continue
+        layer, comp = c.rsplit(".", 1)
+        if fnmatch.fnmatchcase(layer, pattern) and comp in ("R", "G", "B"):
+            found.setdefault(layer, {})[comp] = c
+    return {k: tuple(v[x] for x in "RGB") for k, v in sorted(found.items()) if len(v) == 3}
+
+
+def kernel_rule(layer: str) -> str:
+    low = layer.lower()
+    if any(a.lower() in low for a in ("diffuse", "diff")):
+        return "diffuse"
+    if any(a.lower() in low for a in ("specular", "spec")):
+        return "specular"
+    return "colour"
+
+
+def _values(img: DeepImage, m: ChannelMap, layers: dict, perm: np.ndarray) -> dict:
+    """Per reconstruction ('diffuse', 'specular', 'pass') the [N, 3 * len(layers)] values of one (compensated)
+    frame in sorted order; 'pass' holds the emission share that is not denoised."""
+    canon, residual = canonical(img, m)
+    n = img.num_bins
+    beauty = np.stack([img.channel(c) for c in m.beauty], 1).astype(np.float64)
+    get = lambda name: (np.stack([canon.channel(f"{name}.{c}") for c in "RGB"], 1).astype(np.float64)  # noqa: E731
+                        if f"{name}.R" in canon.channels else np.zeros((n, 3)))
+    spec = get("specular") if m.split else np.zeros((n, 3))
+    emit = get("emission")
+    safe = np.where(np.abs(beauty) > 1e-12, beauty, 1.0)
+    r_s = np.where(np.abs(beauty) > 1e-12, spec / safe, 0.0)
+    r_e = np.where(np.abs(beauty) > 1e-12, emit / safe, 0.0)
+    r_d = 1.0 - r_s - r_e
+    out = {"diffuse": [], "specular": [], "pass": []}
+    for layer, chans in layers.items():
+        v = np.nan_to_num(np.stack([img.channel(c) for c in chans], 1).astype(np.float64))
+        rule = kernel_rule(layer)
+        if rule == "diffuse" or (rule == "specular" and not m.split):
+            parts = (v, 0 * v, 0 * v)
+        elif rule == "specular":
+            parts = (0 * v, v, 0 * v)
+        else:
+            parts = (v * r_d, v * r_s, v * r_e)
+        for key, p in zip(("diffuse", "specular", "pass"), parts):
+            out[key].append(p)
+    return {k: torch.from_numpy(np.concatenate(v, 1)[perm].astype(np.float32)) for k, v in out.items()}
+
+
+def denoise_aovs(model, images: list, centre: int, mapping: ChannelMap, layers: dict, embeddings: list,
+                 perms: list, offsets: list) -> dict:
+    """Denoised AOV layers of frame `centre`: layer -> [N, 3] in the file's bin order.
+
+    images: the window's frames holding the beauty channels the mapping names and the AOV channels, not yet
+    motion-compensated; embeddings/perms/offsets: per window frame, as the primary pass made them (the cache)."""
+    from .denoise import is_cross_frame
+    from .motion import compensate
+
+    cross = is_cross_frame(model)
+    moved, _ = compensate(images, centre) if len(images) > 1 else (images, 0)
+    h, w = images[centre].height, images[centre].width
+    vals, window = [], []
+    for k, img in enumerate(moved):
+        srt_perm = canonical(img, mapping)[0].sorted()[1]
+        if len(srt_perm) != len(perms[k]) or not np.array_equal(srt_perm, perms[k]):
+            raise RanadError("the AOV frames do not match the cached bin layout (another render?)", None)
+        vals.append(_values(img, mapping, layers, perms[k]))
+        layout = Layout.of(torch.as_tensor(offsets[k]), h, w)
+        window.append(ModelInputs(layout, None, {}))
+    feats = [torch.from_numpy(np.asarray(e, np.float16)).float() for e in embeddings]
+    total = vals[centre]["diffuse"].shape[1]
+    denoised = {"diffuse": [], "specular": []}
+    with torch.inference_mode():
+        for a in range(0, max(total, 1), MAX_VALUE_CHANNELS):
+            b = min(total, a + MAX_VALUE_CHANNELS)
+            for name in ("diffuse", "specular"):
+                if name not in (model.single.recon if cross else model.recon):
+                    denoised[name].append(vals[centre][name][:, a:b])   # a model without that layer: as is
+                    continue
+                if cross:
+                    for inp, v in zip(window, vals):
+                        inp.layers = {name: v[name][:, a:b]}
+                    res = model.reconstruct(feats, window, centre)[name]
+                else:
+                    res = model.recon[name](feats[0], window[0].layout, vals[0][name][:, a:b])
+                denoised[name].append(res)
+    total_out = (torch.cat(denoised["diffuse"], 1) + torch.cat(denoised["specular"], 1) + vals[centre]["pass"])
+    out = unsort(total_out.numpy(), perms[centre])
+    return {layer: out[:, 3 * i:3 * i + 3] for i, layer in enumerate(layers)}
