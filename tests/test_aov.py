@@ -1,0 +1,128 @@
+"""`ranad aov`: light groups that sum to the beauty stay summing to it after denoising (single- and cross-frame
+models, through the cache and in one step), and stale or mismatched caches are refused."""
+
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+from click.testing import CliRunner
+
+from ranad_cli.main import cli
+from ranad_core.aov import aov_layers, denoise_aovs, kernel_rule
+from ranad_core.channels import detect
+from ranad_core.denoise import denoise_window
+from ranad_core.exr import read_deep, write_deep
+from ranad_core.model import RaNAD, feature_dim, get_config
+from ranad_core.model.crossframe import CrossFrameRaNAD
+
+SHOT = Path(__file__).resolve().parents[1] / "examples" / "synth_shot"
+GROUPS = ("lg_key", "lg_fill", "lg_rim")
+
+
+def exact_groups(img):
+    """The frame with float channels and lg_rim set so that the light groups sum exactly to R, G, B."""
+    ch = img.channels
+    vals = img.values.astype(np.float32).copy()
+    for c in "RGB":
+        vals[:, ch.index(f"lg_rim.{c}")] = (vals[:, ch.index(c)] - vals[:, ch.index(f"lg_key.{c}")]
+                                            - vals[:, ch.index(f"lg_fill.{c}")])
+    out = img.with_values(vals)
+    out.channel_types = {c: ("uint" if c in img.ids else "float") for c in list(ch) + list(img.ids)}
+    return out
+
+
+def sums(img, prefix=""):
+    ch = img.channels
+    lg = sum(img.values[:, [ch.index(f"{g}.{c}") for c in "RGB"]].astype(np.float64) for g in GROUPS)
+    return lg, img.values[:, [ch.index(c) for c in "RGB"]].astype(np.float64)
+
+
+def models():
+    torch.manual_seed(0)
+    single = RaNAD(get_config("cpu-small"), feature_dim()).eval()
+    cross = CrossFrameRaNAD.from_single(single, get_config("cpu-small-xf"), feature_dim()).eval()
+    for g in cross.temporal_gate.values():     # open the temporal step, so the test covers it
+        torch.nn.init.constant_(g.bias, 0.0)
+    return single, cross
+
+
+def test_layers_and_rules():
+    img = read_deep(SHOT / "noisy_spp16.0001.exr")
+    assert list(aov_layers(img.channels, "lg_*")) == sorted(GROUPS)
+    assert aov_layers(img.channels, "nothing*") == {}
+    assert kernel_rule("diffuse_key") == "diffuse" and kernel_rule("spec_rim") == "specular"
+    assert kernel_rule("lg_key") == "colour"
+
+
+@pytest.mark.parametrize("cross_frame", [False, True])
+def test_light_groups_sum_to_the_denoised_beauty(cross_frame):
+    single, cross = models()
+    model = cross if cross_frame else single
+    frames = [exact_groups(read_deep(SHOT / f"noisy_spp16.{i:04d}.exr")) for i in range(3)]
+    lg, rgb = sums(frames[1])
+    assert np.abs(lg - rgb).max() < 1e-6
+    images, centre = (frames, 1) if cross_frame else ([frames[1]], 0)
+    res = denoise_window(model, images, centre, want_embeddings=True, tile=16)   # tiles: the primary pass
+    layers = aov_layers(frames[1].channels, "lg_*")
+    out = denoise_aovs(model, images, centre, detect(frames[1]), layers, res.embeddings, res.perms, res.offsets)
+    lg_d = sum(out[g].astype(np.float64) for g in GROUPS)
+    _, rgb_d = sums(res.image)
+    scale = np.abs(rgb_d).max()
+    assert np.abs(lg_d - rgb_d).max() < 1e-5 * scale
+    assert np.abs(lg_d - lg).max() > 1e-2 * scale          # the groups were denoised, not copied
+
+
+def test_aov_command_through_the_cache_and_refusals(tmp_path):
+    single, _ = models()
+    from safetensors.torch import save_file
+
+    model = tmp_path / "m.safetensors"
+    save_file({k: v.contiguous() for k, v in single.state_dict().items()}, str(model),
+              metadata={"model_config": json.dumps(single.config.to_dict())})
+    src = tmp_path / "in"
+    src.mkdir()
+    for f in range(3):
+        write_deep(src / f"b.{f:04d}.exr", exact_groups(read_deep(SHOT / f"noisy_spp16.{f:04d}.exr")))
+    run = lambda *a: CliRunner().invoke(cli, [str(x) for x in a])  # noqa: E731
+    r = run("denoise", src / "b.####.exr", "-o", tmp_path / "d" / "b.####.exr", "--model", model, "--cache",
+            tmp_path / "cache")
+    assert r.exit_code == 0, r.output
+    r = run("aov", tmp_path / "cache", "--layers", "lg_*", "-o", tmp_path / "a" / "lg.####.exr")
+    assert r.exit_code == 0, r.output
+    for f in range(3):
+        a, d = read_deep(tmp_path / "a" / f"lg.{f:04d}.exr"), read_deep(tmp_path / "d" / f"b.{f:04d}.exr")
+        np.testing.assert_array_equal(a.offsets, d.offsets)
+        lg, _ = sums(a)
+        _, rgb = sums(d)
+        assert np.abs(lg - rgb).max() < 1e-5 * np.abs(rgb).max()
+    # one step: ranad denoise --aovs writes the same light groups
+    r = run("denoise", src / "b.####.exr", "-o", tmp_path / "one" / "b.####.exr", "--model", model, "--aovs", "lg_*")
+    assert r.exit_code == 0, r.output
+    one, two = read_deep(tmp_path / "one" / "b.0001.exr"), read_deep(tmp_path / "a" / "lg.0001.exr")
+    np.testing.assert_allclose(one.channel("lg_key.G"), two.channel("lg_key.G"), rtol=1e-5, atol=1e-6)
+    # a stale cache: the beauty was re-rendered (other depths) after the cache was made
+    img = read_deep(src / "b.0001.exr")
+    vals = img.values.copy()
+    vals[:, img.channels.index("Z")] *= 1.01
+    write_deep(src / "b.0001.exr", img.with_values(vals))
+    r = run("aov", tmp_path / "cache", "--layers", "lg_*", "-o", str(tmp_path / "a2") + "/")
+    assert r.exit_code == 2 and "does not match this file's bin layout" in r.output
+    # AOV files of another layout
+    other = tmp_path / "other"
+    other.mkdir()
+    for f in range(3):
+        shutil.copy(SHOT / f"noisy_spp16.{(f + 1) % 3:04d}.exr", other / f"x.{f:04d}.exr")
+    shutil.copy(tmp_path / "cache" / "b.0000.ranadcache", tmp_path / "only0.ranadcache")
+    r = run("aov", tmp_path / "only0.ranadcache", "--layers", "lg_*", "--input", other / "x.####.exr",
+            "-o", tmp_path / "a3.exr")
+    assert r.exit_code == 2 and "bin layout differs" in r.output
+    r = run("aov", tmp_path / "only0.ranadcache", "--layers", "nope_*", "-o", tmp_path / "a4.exr")
+    assert r.exit_code == 2 and "no AOV layers match" in r.output
+    (tmp_path / "junk.ranadcache").write_bytes(b"junk" * 10)
+    r = run("aov", tmp_path / "junk.ranadcache", "--layers", "lg_*", "-o", tmp_path / "a5.exr")
+    assert r.exit_code == 2 and "not a ranad cache" in r.output
