@@ -34,7 +34,7 @@ using rana::Grid;
 
 constexpr int kBuffer = 256;             // keys (or queries) buffered per softmax step
 constexpr int64_t kBlocksPerChunk = 64;  // key blocks per bias-gradient partial sum
-constexpr int kScalarLaneDim = 16;       // the one head size compiled for one-lane blocks (tests)
+using rana::kScalarLaneDim;
 
 // Queries sorted by centre pixel: CSR over the key grid (ptr[p]..ptr[p+1] index into order), ascending query id
 // within a pixel, so every sum over queries runs in a fixed order. order is null when the queries are already in

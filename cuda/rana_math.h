@@ -43,6 +43,7 @@
 namespace rana {
 
 constexpr int kMaxDim = 64;   // largest head dimension the kernels accept
+constexpr int kScalarLaneDim = 16;  // the one head size compiled for one-lane blocks on the CPU (tests)
 constexpr int kMaxSpan = 7;   // a block's entries lie on at most kMaxSpan + 1 consecutive pixels of a row
 
 // ---- lane vectors ------------------------------------------------------------------------------------

@@ -80,3 +80,49 @@ def cpu_extension_or_none():
         warnings.warn(f"ranad: C++ RaNA kernels unavailable ({e}); using the slow torch reference",
                       RuntimeWarning, stacklevel=3)
         return None
+
+
+# ---- CUDA ---------------------------------------------------------------------------------------------------
+CUDA_SOURCES = ("rana_cuda.cpp", "rana_cuda_kernels.cu")
+CUDA_HEADERS = ("rana_math.h", "rana_binding.h", "rana_cuda_kernels.h")
+CUDA_ARCHS = ("80", "86", "89", "90")   # what CI compiles for (cuda/check_build.sh)
+
+
+@lru_cache(maxsize=None)
+def load_cuda_extension():
+    """The CUDA kernels' module (``forward``/``backward`` taking the stream as an integer), built with nvcc by
+    torch's JIT builder for the GPU present; raises BuildUnavailable without CUDA torch, a GPU or nvcc."""
+    import torch
+
+    if os.environ.get("RANAD_NO_EXTENSION"):
+        raise BuildUnavailable("disabled by RANAD_NO_EXTENSION")
+    if not torch.cuda.is_available():
+        raise BuildUnavailable("no CUDA device (or a CPU-only build of torch)")
+    missing = [n for n in CUDA_SOURCES + CUDA_HEADERS if not (SOURCE_DIR / n).is_file()]
+    if missing:
+        raise BuildUnavailable(f"kernel sources not found in {SOURCE_DIR} ({', '.join(missing)})")
+    from torch.utils.cpp_extension import load
+
+    h = hashlib.sha1()
+    for name in CUDA_SOURCES + CUDA_HEADERS:
+        h.update((SOURCE_DIR / name).read_bytes())
+    try:
+        return load(name=f"ranad_rana_cuda_{h.hexdigest()[:10]}", sources=[str(SOURCE_DIR / n) for n in CUDA_SOURCES],
+                    extra_cflags=["-O3", "-std=c++20"],
+                    extra_cuda_cflags=["-O3", "-std=c++20", "-Xptxas", "-warn-spills", "--expt-relaxed-constexpr"],
+                    extra_include_paths=[str(SOURCE_DIR)], verbose=False)
+    except Exception as e:  # noqa: BLE001
+        lines = str(e).strip().splitlines() or ["unknown error"]
+        first_error = next((ln for ln in lines if "error" in ln.lower()), lines[-1])
+        raise BuildUnavailable(f"building the CUDA RaNA kernels failed: {first_error.strip()}") from e
+
+
+@lru_cache(maxsize=None)
+def cuda_extension_or_none():
+    """The CUDA module, or None after warning once why the reference will run on the GPU instead."""
+    try:
+        return load_cuda_extension()
+    except BuildUnavailable as e:
+        warnings.warn(f"ranad: CUDA RaNA kernels unavailable ({e}); using the torch reference on the GPU",
+                      RuntimeWarning, stacklevel=3)
+        return None

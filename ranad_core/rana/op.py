@@ -6,8 +6,10 @@ shapes) so it composes with autograd and torch.compile. Backends, picked by ``ba
 * ``"cpu"``: the C++/OpenMP kernels (``cuda/rana_cpu.cpp``), built on first use;
 * ``"cpu-scalar"``: the same kernels with one lane per block, i.e. the bodies exactly as a GPU thread runs
   them (head dimensions up to 16; slow; for tests);
+* ``"cuda"``: the CUDA kernels (``cuda/rana_cuda*.cpp/.cu``, the same block bodies with one lane per thread),
+  built on first use with nvcc;
 * ``"reference"``: the plain-torch oracle (:mod:`.reference`), any device, slow and memory-hungry;
-* ``"auto"`` (default): the C++ kernels for CPU tensors when they build, the reference otherwise.
+* ``"auto"`` (default): the kernels of the tensors' device when they build, the reference otherwise.
 """
 
 from __future__ import annotations
@@ -17,11 +19,11 @@ from typing import Literal, Optional
 
 import torch
 
-from .extension import cpu_extension_or_none, load_cpu_extension
+from .extension import cpu_extension_or_none, cuda_extension_or_none, load_cpu_extension, load_cuda_extension
 from .neighborhood import disc
 from .reference import rana_reference
 
-Backend = Literal["auto", "cpu", "cpu-scalar", "reference"]
+Backend = Literal["auto", "cpu", "cpu-scalar", "cuda", "reference"]
 
 
 def _disc_args(radius: float):
@@ -36,9 +38,12 @@ def rana_fwd(q: torch.Tensor, k: torch.Tensor, v: torch.Tensor, q_pixels: torch.
              ) -> tuple[torch.Tensor, torch.Tensor]:
     """Forward kernels: (out [Nq, H, dv], lse [Nq, H]); lse is -inf for queries with an empty disc."""
     dy, dx0, dx1, R = _disc_args(radius)
+    scale = 1.0 / math.sqrt(q.shape[2])
+    if q.is_cuda:
+        return tuple(load_cuda_extension().forward(q, k, v, q_pixels, k_offsets, hk, wk, dy, dx0, dx1, R, bias,
+                                                   scale, torch.cuda.current_stream(q.device).cuda_stream))
     ext = load_cpu_extension()
-    out, lse = ext.forward(q, k, v, q_pixels, k_offsets, hk, wk, dy, dx0, dx1, R, bias, 1.0 / math.sqrt(q.shape[2]),
-                           scalar_lanes)
+    out, lse = ext.forward(q, k, v, q_pixels, k_offsets, hk, wk, dy, dx0, dx1, R, bias, scale, scalar_lanes)
     return out, lse
 
 
@@ -56,9 +61,15 @@ def rana_bwd(dout: torch.Tensor, q: torch.Tensor, k: torch.Tensor, v: torch.Tens
     dy, dx0, dx1, R = _disc_args(radius)
     dout = dout.contiguous()
     delta = (dout * out).sum(-1).contiguous()
-    ext = load_cpu_extension()
-    dq, dk, dv, dbias = ext.backward(dout, q, k, v, lse, delta, q_pixels, k_offsets, hk, wk, dy, dx0, dx1, R,
-                                     bias, 1.0 / math.sqrt(q.shape[2]), need_dbias, scalar_lanes)
+    scale = 1.0 / math.sqrt(q.shape[2])
+    if q.is_cuda:
+        dq, dk, dv, dbias = load_cuda_extension().backward(dout, q, k, v, lse, delta, q_pixels, k_offsets, hk, wk, dy,
+                                                           dx0, dx1, R, bias, scale, need_dbias,
+                                                           torch.cuda.current_stream(q.device).cuda_stream)
+    else:
+        ext = load_cpu_extension()
+        dq, dk, dv, dbias = ext.backward(dout, q, k, v, lse, delta, q_pixels, k_offsets, hk, wk, dy, dx0, dx1, R,
+                                         bias, scale, need_dbias, scalar_lanes)
     if not need_dbias:
         dbias = q.new_empty((0,))
     return dq, dk, dv, dbias
@@ -129,11 +140,15 @@ def rana(q: torch.Tensor, k: torch.Tensor, v: torch.Tensor, q_pixels: torch.Tens
     relative-position bias added to the logits. Returns out [Nq, heads, dv] with scale 1/sqrt(d); a query
     whose disc holds no key bins gets zeros.
     """
-    if backend not in ("auto", "cpu", "cpu-scalar", "reference"):
+    if backend not in ("auto", "cpu", "cpu-scalar", "cuda", "reference"):
         raise ValueError(f"unknown RaNA backend {backend!r}")
     hk, wk = _validate(q, k, v, q_pixels, k_offsets, k_size, radius, bias)
-    use_cpu = backend in ("cpu", "cpu-scalar") or (backend == "auto" and q.device.type == "cpu" and cpu_extension_or_none())
-    if not use_cpu:
+    if backend in ("cpu", "cpu-scalar") and q.is_cuda or backend == "cuda" and not q.is_cuda:
+        raise ValueError(f"backend {backend!r} does not run on {q.device.type} tensors")
+    if backend == "auto":
+        available = cuda_extension_or_none() if q.is_cuda else cpu_extension_or_none()
+        backend = ("cuda" if q.is_cuda else "cpu") if available else "reference"
+    if backend == "reference":
         return rana_reference(q, k, v, q_pixels, k_offsets, (hk, wk), radius, bias)
     q, k, v = (_kernel_layout(x) for x in (q, k, v))
     q_pixels = q_pixels.to(torch.int64).contiguous()
