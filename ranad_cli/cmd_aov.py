@@ -7,6 +7,7 @@ import json
 import os
 
 import click
+import numpy as np
 from tqdm import tqdm
 
 from ranad_core.errors import RanadError
@@ -96,8 +97,6 @@ def aov_cmd(cache, pattern, output, aov_input):
                 if not (a_img.offsets.shape == b_img.offsets.shape and (a_img.offsets == b_img.offsets).all()):
                     raise RanadError("bin layout differs from the denoised beauty's (another render?)", p)
                 names = [c for chans in layers.values() for c in chans]
-                import numpy as np
-
                 cols = np.stack([a_img.channel(c) for c in names], 1)
                 keep = [c for c in b_img.channels if c not in names]
                 base = b_img.select(keep)

@@ -29,7 +29,8 @@ def parse_bytes(text: str) -> float:
                    "created. Inputs are never overwritten.")
 @click.option("--frames", help="Frame range for patterns, e.g. 1001-1010 (default: all on disk).")
 @click.option("--model", default=None, help="Shipped model name, .safetensors file or training run folder "
-                                            "(default: the shipped default model).")
+                                            "(default: the shipped cross-frame model for sequences, the "
+                                            "single-frame one otherwise).")
 @click.option("--device", type=click.Choice(["auto", "cpu", "cuda"]), default="auto", show_default=True,
               help="Where the model runs (auto: cpu until the CUDA RaNA kernels are available).")
 @click.option("--threads", type=click.IntRange(1), default=None, help="CPU threads (default: all cores).")
@@ -99,6 +100,11 @@ def denoise_cmd(inputs, output, frames, model, device, threads, kind, maps, keep
         except OSError as e:
             raise RanadError(f"cannot create the cache folder ({e.strerror or e})", cache_dir) from None
     prescan(frames_list)
+    if model is None:  # the cross-frame model whenever frames have neighbours
+        from ranad_core.model.store import default_model
+
+        numbers = {f.frame for f in sequence if f.frame is not None}
+        model = default_model(any(n + 1 in numbers for n in numbers) and window != 1)
     loaded = load_model(model)
     first = read_deep(frames_list[0].path)
     mapping = detect(first, overrides, frames_list[0].path)

@@ -22,7 +22,15 @@ from .inputs import feature_dim
 from .ranad import RaNAD
 
 WEIGHTS_DIR = Path(__file__).resolve().parents[1] / "weights"
-DEFAULT_MODEL = "cpu-small-v1"
+DEFAULT_MODEL = "cpu-small-v1"           # single frames
+DEFAULT_CROSS_MODEL = "cpu-small-xf-v1"  # sequences: frames with neighbours
+
+
+def default_model(sequence: bool) -> str:
+    """The shipped model `ranad denoise` uses without --model: the cross-frame one for sequences (when shipped)."""
+    if sequence and (WEIGHTS_DIR / f"{DEFAULT_CROSS_MODEL}.safetensors").is_file():
+        return DEFAULT_CROSS_MODEL
+    return DEFAULT_MODEL
 
 
 @dataclass
