@@ -25,7 +25,7 @@ from .train.data import find_pairs
 
 METHODS = ("noisy", "oidn", "recolour", "ranad")
 FLAT = ("smape", "dssim", "flip")
-DEEP = ("bin_smape", "z_rel", "comp_flip", "comp_smape", "sep_flip", "sep_smape")
+DEEP = ("bin_smape", "z_rel", "comp_flip", "comp_smape", "sep_smape", "sep_dssim")
 COLUMNS = ("scene", "kind", "spp", "method", *FLAT, *DEEP, "seconds")
 
 
@@ -112,7 +112,7 @@ def markdown(rows: list, title: str = "") -> str:
     """The summary table in Markdown (lower is better everywhere; n/a: the method has no deep output)."""
     s = summary(rows)
     cols = ("spp", "method", "n", "flip", "smape", "dssim", "bin_smape", "z_rel", "comp_flip", "comp_smape",
-            "sep_flip", "sep_smape", "seconds")
+            "sep_smape", "sep_dssim", "seconds")
     lines = ([f"### {title}", ""] if title else []) + ["| " + " | ".join(cols) + " |",
                                                       "|" + "---|" * len(cols)]
     lines += ["| " + " | ".join(_fmt(r[c]) for c in cols) + " |" for r in s]
