@@ -129,3 +129,18 @@ def test_eval_command_writes_table_csv_and_grid(tmp_path):
     assert (out / "grid.png").stat().st_size > 1000 and (out / "eval.md").is_file()
     r = CliRunner().invoke(cli, ["eval", str(ds), "-o", str(out), "--model", str(run), "--spp", "7"])
     assert r.exit_code == 2 and "no pairs match" in r.output
+
+
+def test_shipped_default_model_denoises_the_example():
+    """The shipped weights load by name and bring the example's frame closer to its reference."""
+    from ranad_core import metrics
+    from ranad_core.model.store import DEFAULT_MODEL, shipped_models
+
+    assert DEFAULT_MODEL in shipped_models()
+    loaded = load_model(None)
+    assert loaded.model_id.startswith(DEFAULT_MODEL + "@")
+    noisy, ref = read_deep(SHOT / "noisy_spp16.0001.exr"), read_deep(SHOT / "reference_spp16.0001.exr")
+    flat_ref = metrics.flat_rgb(ref)
+    before = metrics.smape(flat_ref, metrics.flat_rgb(noisy))
+    after = metrics.smape(flat_ref, metrics.flat_rgb(denoise_frame(loaded.model, noisy).image))
+    assert after < 0.7 * before, (before, after)
