@@ -66,12 +66,21 @@ def run(size, radius, heads, dim, backend, repeats, layout="natural"):
     offsets, q, k, v = problem(size, heads, dim, layout=layout)
     qp, ko, ks = self_attention_layout(offsets, size, size)
     bias = torch.zeros(heads, 2 * int(radius) + 1, 2 * int(radius) + 1)
-    fwd = best_of(lambda: rana(q, k, v, qp, ko, ks, radius, bias, backend=backend), repeats)
+    if backend == "cuda":  # everything on the GPU, timings synchronised
+        q, k, v, qp, ko, bias = (t.cuda() for t in (q, k, v, qp, ko, bias))
+    sync = torch.cuda.synchronize if backend == "cuda" else (lambda: None)
+
+    def timed_fwd():
+        rana(q, k, v, qp, ko, ks, radius, bias, backend=backend)
+        sync()
+
+    fwd = best_of(timed_fwd, repeats)
     qg, kg, vg, bg = (t.detach().requires_grad_(True) for t in (q, k, v, bias))
 
     def fwd_bwd():
         out = rana(qg, kg, vg, qp, ko, ks, radius, bg, backend=backend)
         out.backward(torch.ones_like(out))
+        sync()
 
     both = best_of(fwd_bwd, repeats)
     return fwd, both, pairs_of(offsets, size, radius), int(offsets[-1])
@@ -103,6 +112,13 @@ def main() -> None:
         print(f"{label:12s} {size}x{size} ({bins} bins, {pairs / 1e6:.1f} M pairs): "
               f"forward {fwd * 1e3:8.1f} ms = {pairs / fwd / 1e6:6.1f} M pairs/s, {pairs * flop / fwd / 1e9:5.1f} "
               f"GFLOP/s | forward+backward {both * 1e3:8.1f} ms = {pairs / both / 1e6:6.1f} M pairs/s")
+    if torch.cuda.is_available():  # the CUDA kernels on the GPU present, same problem
+        fwd, both, pairs, bins = run(args.size, args.radius, args.heads, args.dim, "cuda", args.repeats, args.layout)
+        print(f"CUDA kernels {args.size}x{args.size} on {torch.cuda.get_device_name()}: forward {fwd * 1e3:8.2f} ms = "
+              f"{pairs / fwd / 1e6:7.1f} M pairs/s | forward+backward {both * 1e3:8.2f} ms = "
+              f"{pairs / both / 1e6:7.1f} M pairs/s ({rows[0][2] / fwd:.1f}x / {rows[0][3] / both:.1f}x the CPU run)")
+    else:
+        print("CUDA kernels: not measured (no GPU here)")
     _, _, f_small, b_small, _ = rows[1]
     _, _, f_ref, b_ref, _ = rows[2]
     print(f"speed-up over the reference at {args.ref_size}x{args.ref_size}: forward {f_ref / f_small:.0f}x, "
