@@ -34,15 +34,17 @@ try:
     exec(sys.argv[1])
 except SystemExit as e:
     code = e.code or 0
-print(json.dumps({"seconds": time.perf_counter() - t, "peak_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
-                  "code": code}), file=sys.stderr)
+# VmHWM: this process's peak (ru_maxrss would carry over the parent's from before the exec)
+hwm = [int(l.split()[1]) for l in open("/proc/self/status") if l.startswith("VmHWM")]
+peak = hwm[0] / 1024 if hwm else resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+print(json.dumps({"seconds": time.perf_counter() - t, "peak_mb": peak, "code": code}), file=sys.stderr)
 """
 
 
 def run_measured(code: str, *args: str, threads: int) -> dict:
     env = dict(os.environ, OMP_NUM_THREADS=str(threads))
     p = subprocess.run([sys.executable, "-c", RUNNER, code, *args], capture_output=True, text=True, env=env, cwd=ROOT)
-    last = [ln for ln in p.stderr.splitlines() if ln.startswith("{")]
+    last = [ln[ln.index('{"seconds"'):] for ln in p.stderr.splitlines() if '{"seconds"' in ln]  # after tqdm's codes
     if p.returncode or not last:
         raise SystemExit(f"run failed:\n{p.stdout}\n{p.stderr}")
     res = json.loads(last[-1])

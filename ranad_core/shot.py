@@ -63,8 +63,9 @@ def prescan(frames) -> None:
 
 def frame_memory(img) -> float:
     """Bytes the pipeline holds per frame besides the model's tile work: the decoded frame, its canonical and
-    sorted copies, the output and per-layer results (about six copies of the values)."""
-    return 6.0 * img.values.nbytes + 64.0 * img.num_bins
+    sorted copies, the output and per-layer results. Measured: a 1080p frame of 6.5 M bins x 35 channels (0.9 GB
+    of values) peaked at 6.3 GB with 2.6 GB of tile budget, i.e. about 4x the values."""
+    return 4.0 * img.values.nbytes + 64.0 * img.num_bins
 
 
 def with_denoised_aovs(model, images, centre, mapping, result, pattern: str, source: str):
