@@ -96,42 +96,15 @@ Block<Q> fill_block(const BlockSpan& s, const int64_t* ptr, int64_t Wk, const in
   return b;
 }
 
-// Calls f.template operator()<DK, DV>() with the compiled head sizes (see the header comment).
+// Calls f.template operator()<DK, DV>() with the compiled head sizes (rana::dispatch_head_dims; one-lane blocks:
+// 16 only).
 template <typename V, typename F>
 void dispatch_dims(int dk, int dv, F&& f) {
   if constexpr (rana::Lanes<V>::L == 1) {
     if (dk != kScalarLaneDim || dv != kScalarLaneDim) throw std::invalid_argument("one-lane blocks: d = 16 only");
     f.template operator()<kScalarLaneDim, kScalarLaneDim>();
-  } else if constexpr (std::is_same_v<typename rana::Lanes<V>::T, double>) {  // gradient checks: few sizes
-    auto with_dv = [&]<int DK>() {
-      switch (dv) {
-        case 3: return f.template operator()<DK, 3>();
-        case 16: return f.template operator()<DK, 16>();
-        case 64: return f.template operator()<DK, 64>();
-        default: throw std::invalid_argument("value head size not compiled");
-      }
-    };
-    if (dk == 16) return with_dv.template operator()<16>();
-    if (dk == 64) return with_dv.template operator()<64>();
-    throw std::invalid_argument("key head size not compiled");
   } else {
-    auto with_dv = [&]<int DK>() {
-      switch (dv) {
-        case 3: return f.template operator()<DK, 3>();
-        case 8: return f.template operator()<DK, 8>();
-        case 16: return f.template operator()<DK, 16>();
-        case 32: return f.template operator()<DK, 32>();
-        case 64: return f.template operator()<DK, 64>();
-        default: throw std::invalid_argument("value head size not compiled");
-      }
-    };
-    switch (dk) {
-      case 8: return with_dv.template operator()<8>();
-      case 16: return with_dv.template operator()<16>();
-      case 32: return with_dv.template operator()<32>();
-      case 64: return with_dv.template operator()<64>();
-      default: throw std::invalid_argument("key head size not compiled");
-    }
+    rana::dispatch_head_dims<typename rana::Lanes<V>::T>(dk, dv, f);
   }
 }
 

@@ -7,7 +7,6 @@
 
 #include <stdexcept>
 #include <string>
-#include <type_traits>
 
 #include "rana_cuda_kernels.h"
 
@@ -104,43 +103,6 @@ __global__ void sum_partials(const T* partial, int64_t blocks, int H, int side2,
   dbias[i] = acc;
 }
 
-// Calls f.template operator()<DK, DV>() for the compiled head sizes: the CPU path's (float: 8, 16, 32, 64 for q/k
-// and 3, 8, 16, 32, 64 for v; double, for gradient checks: 16, 64 and 3, 16, 64).
-template <typename T, typename F>
-void dispatch(int dk, int dv, F&& f) {
-  if constexpr (std::is_same_v<T, double>) {
-    auto with_dv = [&]<int DK>() {
-      switch (dv) {
-        case 3: return f.template operator()<DK, 3>();
-        case 16: return f.template operator()<DK, 16>();
-        case 64: return f.template operator()<DK, 64>();
-        default: throw std::invalid_argument("RaNA CUDA: value head size not compiled");
-      }
-    };
-    if (dk == 16) return with_dv.template operator()<16>();
-    if (dk == 64) return with_dv.template operator()<64>();
-    throw std::invalid_argument("RaNA CUDA: key head size not compiled");
-  } else {
-  auto with_dv = [&]<int DK>() {
-    switch (dv) {
-      case 3: return f.template operator()<DK, 3>();
-      case 8: return f.template operator()<DK, 8>();
-      case 16: return f.template operator()<DK, 16>();
-      case 32: return f.template operator()<DK, 32>();
-      case 64: return f.template operator()<DK, 64>();
-      default: throw std::invalid_argument("RaNA CUDA: value head size not compiled");
-    }
-  };
-  switch (dk) {
-    case 8: return with_dv.template operator()<8>();
-    case 16: return with_dv.template operator()<16>();
-    case 32: return with_dv.template operator()<32>();
-    case 64: return with_dv.template operator()<64>();
-    default: throw std::invalid_argument("RaNA CUDA: key head size not compiled");
-  }
-  }
-}
-
 dim3 grid_for(int64_t n, int H) { return dim3(unsigned((n + kThreads - 1) / kThreads), unsigned(H)); }
 
 }  // namespace
@@ -149,7 +111,7 @@ template <typename T>
 void forward(const rana::Op<T>& op, const rana::Operand<T>& q, const T* kt, const T* vt, const int64_t* qpix,
              int64_t nq, T* out, T* lse, void* stream) {
   if (nq == 0) return;
-  dispatch<T>(op.dk, op.dv, [&]<int DK, int DV>() {
+  rana::dispatch_head_dims<T>(op.dk, op.dv, [&]<int DK, int DV>() {
     forward_kernel<T, DK, DV><<<grid_for(nq, op.H), kThreads, 0, cudaStream_t(stream)>>>(op, q, kt, vt, qpix, nq,
                                                                                           out, lse);
   });
@@ -161,7 +123,7 @@ void backward_dq(const rana::Op<T>& op, const rana::Operand<T>& q, const rana::O
                  const T* delta, const T* kt, const T* vt, const int64_t* qpix, int64_t nq,
                  const rana::Output<T>& dq, void* stream) {
   if (nq == 0) return;
-  dispatch<T>(op.dk, op.dv, [&]<int DK, int DV>() {
+  rana::dispatch_head_dims<T>(op.dk, op.dv, [&]<int DK, int DV>() {
     dq_kernel<T, DK, DV><<<grid_for(nq, op.H), kThreads, 0, cudaStream_t(stream)>>>(op, q, dout, lse, delta, kt, vt,
                                                                                      qpix, nq, dq);
   });
@@ -183,7 +145,7 @@ void backward_dkdv(const rana::Op<T>& op, const T* qst, const T* dost, const T* 
   const dim3 grid = grid_for(nk, op.H);
   if (dbias) check(cudaMemsetAsync(partial, 0, sizeof(T) * partial_size(nk, op.H, op.rows.R), cudaStream_t(stream)),
                    "memset");
-  dispatch<T>(op.dk, op.dv, [&]<int DK, int DV>() {
+  rana::dispatch_head_dims<T>(op.dk, op.dv, [&]<int DK, int DV>() {
     if (dbias)
       dkdv_kernel<T, DK, DV, true><<<grid, kThreads, 0, cudaStream_t(stream)>>>(op, qst, dost, lse_s, delta_s, k, v,
                                                                                 q_ptr, kpix, nk, dk, dv, partial);

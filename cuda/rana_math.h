@@ -21,6 +21,8 @@
 #include <cmath>
 #include <cstdint>
 #include <cstring>
+#include <stdexcept>
+#include <type_traits>
 
 #if defined(__CUDACC__)
 #define RANA_HD __host__ __device__ __forceinline__
@@ -757,6 +759,45 @@ RANA_HD void backward_dkdv_block(const Op<typename Lanes<V>::T>& op, const Block
   for (int c = 0; c < DK; ++c) acc_k[c] *= op.scale;
   store_lanes<V, HB, DK>(acc_k, b, h0, dk);
   store_lanes<V, HB, DV>(acc_v, b, h0, dv);
+}
+
+// ---- compiled head sizes (host side: the drivers of the CPU and CUDA kernels) ----------------------------
+// Calls f.template operator()<DK, DV>() for the head sizes the kernels are compiled for: float d in 8, 16, 32, 64
+// (q, k) and 3, 8, 16, 32, 64 (v); double (gradient checks) 16, 64 and 3, 16, 64. The bindings pad other sizes
+// with zero channels, which changes no logit and no output.
+template <typename T, typename F>
+void dispatch_head_dims(int dk, int dv, F&& f) {
+  if constexpr (std::is_same_v<T, double>) {
+    auto with_dv = [&]<int DK>() {
+      switch (dv) {
+        case 3: return f.template operator()<DK, 3>();
+        case 16: return f.template operator()<DK, 16>();
+        case 64: return f.template operator()<DK, 64>();
+        default: throw std::invalid_argument("value head size not compiled");
+      }
+    };
+    if (dk == 16) return with_dv.template operator()<16>();
+    if (dk == 64) return with_dv.template operator()<64>();
+    throw std::invalid_argument("key head size not compiled");
+  } else {
+    auto with_dv = [&]<int DK>() {
+      switch (dv) {
+        case 3: return f.template operator()<DK, 3>();
+        case 8: return f.template operator()<DK, 8>();
+        case 16: return f.template operator()<DK, 16>();
+        case 32: return f.template operator()<DK, 32>();
+        case 64: return f.template operator()<DK, 64>();
+        default: throw std::invalid_argument("value head size not compiled");
+      }
+    };
+    switch (dk) {
+      case 8: return with_dv.template operator()<8>();
+      case 16: return with_dv.template operator()<16>();
+      case 32: return with_dv.template operator()<32>();
+      case 64: return with_dv.template operator()<64>();
+      default: throw std::invalid_argument("key head size not compiled");
+    }
+  }
 }
 
 }  // namespace rana

@@ -82,14 +82,19 @@ def transform(img: DeepImage, flip_x: bool, flip_y: bool, transpose: bool) -> De
                      display_window=(0, 0, nw - 1, nh - 1), channel_types=dict(img.channel_types))
 
 
+def random_window(img: DeepImage, rng: np.random.Generator, crop: int) -> tuple:
+    """A crop x crop window (smaller for smaller images) at a random place inside the data window."""
+    x0d, y0d = img.data_window[:2]
+    cw, ch = min(crop, img.width), min(crop, img.height)
+    x0 = x0d + int(rng.integers(0, img.width - cw + 1))
+    y0 = y0d + int(rng.integers(0, img.height - ch + 1))
+    return (x0, y0, x0 + cw - 1, y0 + ch - 1)
+
+
 def sample(pair: Pair, rng: np.random.Generator, crop: int) -> tuple:
     """A random crop (the same window for noisy and reference) with a random flip/transpose."""
     noisy, ref = load(pair.noisy), load(pair.reference)
-    x0d, y0d = noisy.data_window[:2]
-    cw, ch = min(crop, noisy.width), min(crop, noisy.height)
-    x0 = x0d + int(rng.integers(0, noisy.width - cw + 1))
-    y0 = y0d + int(rng.integers(0, noisy.height - ch + 1))
-    win = (x0, y0, x0 + cw - 1, y0 + ch - 1)
+    win = random_window(noisy, rng, crop)
     fx, fy, tr = (bool(b) for b in rng.integers(0, 2, 3))
     noisy, ref = sorted_pair(noisy.crop(win), ref.crop(win))
     return transform(noisy, fx, fy, tr), transform(ref, fx, fy, tr)
@@ -167,11 +172,7 @@ def sample_window(pair: Pair, rng: np.random.Generator, crop: int, window: int) 
     frames, centre, perm = compensated(pair, lo, hi)
     ref = load(pair.reference)
     ref = gather_bins(ref, perm, ref.offsets)            # in the centre frame's sorted order
-    x0d, y0d = ref.data_window[:2]
-    cw, ch = min(crop, ref.width), min(crop, ref.height)
-    x0 = x0d + int(rng.integers(0, ref.width - cw + 1))
-    y0 = y0d + int(rng.integers(0, ref.height - ch + 1))
-    win = (x0, y0, x0 + cw - 1, y0 + ch - 1)
+    win = random_window(ref, rng, crop)
     fx, fy, tr = (bool(b) for b in rng.integers(0, 2, 3))
     return ([transform(f.crop(win), fx, fy, tr) for f in frames], transform(ref.crop(win), fx, fy, tr), centre)
 
