@@ -19,7 +19,7 @@ from pathlib import Path
 SOURCE_DIR = Path(__file__).resolve().parents[2] / "cuda"
 # the bindings, and the kernel instantiations split so that the build runs them in parallel
 CPU_SOURCES = ("rana_cpu.cpp", "rana_cpu_f32_hb4.cpp", "rana_cpu_f32_hb1.cpp", "rana_cpu_other.cpp")
-CPU_HEADERS = ("rana_math.h", "rana_cpu_kernels.h")
+CPU_HEADERS = ("rana_math.h", "rana_binding.h", "rana_cpu_kernels.h")
 
 
 def _cpu_tag() -> str:
@@ -37,9 +37,10 @@ def _cpu_tag() -> str:
     return hashlib.sha1((platform.machine() + flags).encode()).hexdigest()[:10]
 
 
-def _sources_digest() -> str:
+def _sources_digest(names) -> str:
+    """Hash of the sources and headers a build reads: an edit to any of them gives a new extension name."""
     h = hashlib.sha1()
-    for name in CPU_SOURCES + CPU_HEADERS:
+    for name in names:
         h.update((SOURCE_DIR / name).read_bytes())
     return h.hexdigest()[:10]
 
@@ -48,27 +49,36 @@ class BuildUnavailable(RuntimeError):
     """The C++ kernels cannot be built or loaded here (no compiler, no sources, or a failed build)."""
 
 
-@lru_cache(maxsize=None)
-def load_cpu_extension():
-    """The compiled module (``forward``/``backward``), building it if needed; raises BuildUnavailable."""
+def _check_sources(names) -> None:
     if os.environ.get("RANAD_NO_EXTENSION"):
         raise BuildUnavailable("disabled by RANAD_NO_EXTENSION")
-    missing = [n for n in CPU_SOURCES + CPU_HEADERS if not (SOURCE_DIR / n).is_file()]
+    missing = [n for n in names if not (SOURCE_DIR / n).is_file()]
     if missing:
         raise BuildUnavailable(f"kernel sources not found in {SOURCE_DIR} ({', '.join(missing)})")
-    if not (shutil.which(os.environ.get("CXX", "c++")) or shutil.which("g++")):
-        raise BuildUnavailable("no C++ compiler on PATH (install g++ or set CXX)")
+
+
+def _build(what: str, name: str, sources, **kwargs):
+    """torch's JIT build of `sources` (cached by name); any failure becomes BuildUnavailable with its first error."""
     from torch.utils.cpp_extension import load
 
-    flags = ["-O3", "-std=c++20", "-fopenmp", "-march=native", "-fno-math-errno", "-fno-trapping-math"]
     try:
-        return load(name=f"ranad_rana_cpu_{_cpu_tag()}_{_sources_digest()}",
-                    sources=[str(SOURCE_DIR / n) for n in CPU_SOURCES], extra_cflags=flags,
-                    extra_include_paths=[str(SOURCE_DIR)], extra_ldflags=["-fopenmp"], verbose=False)
+        return load(name=name, sources=[str(SOURCE_DIR / n) for n in sources],
+                    extra_include_paths=[str(SOURCE_DIR)], verbose=False, **kwargs)
     except Exception as e:  # noqa: BLE001 - any build failure means: use the reference
         lines = str(e).strip().splitlines() or ["unknown error"]
         first_error = next((ln for ln in lines if "error" in ln.lower()), lines[-1])
-        raise BuildUnavailable(f"building the C++ RaNA kernels failed: {first_error.strip()}") from e
+        raise BuildUnavailable(f"building the {what} RaNA kernels failed: {first_error.strip()}") from e
+
+
+@lru_cache(maxsize=None)
+def load_cpu_extension():
+    """The compiled module (``forward``/``backward``), building it if needed; raises BuildUnavailable."""
+    _check_sources(CPU_SOURCES + CPU_HEADERS)
+    if not (shutil.which(os.environ.get("CXX", "c++")) or shutil.which("g++")):
+        raise BuildUnavailable("no C++ compiler on PATH (install g++ or set CXX)")
+    flags = ["-O3", "-std=c++20", "-fopenmp", "-march=native", "-fno-math-errno", "-fno-trapping-math"]
+    return _build("C++", f"ranad_rana_cpu_{_cpu_tag()}_{_sources_digest(CPU_SOURCES + CPU_HEADERS)}", CPU_SOURCES,
+                  extra_cflags=flags, extra_ldflags=["-fopenmp"])
 
 
 @lru_cache(maxsize=None)
@@ -94,27 +104,12 @@ def load_cuda_extension():
     torch's JIT builder for the GPU present; raises BuildUnavailable without CUDA torch, a GPU or nvcc."""
     import torch
 
-    if os.environ.get("RANAD_NO_EXTENSION"):
-        raise BuildUnavailable("disabled by RANAD_NO_EXTENSION")
+    _check_sources(CUDA_SOURCES + CUDA_HEADERS)
     if not torch.cuda.is_available():
         raise BuildUnavailable("no CUDA device (or a CPU-only build of torch)")
-    missing = [n for n in CUDA_SOURCES + CUDA_HEADERS if not (SOURCE_DIR / n).is_file()]
-    if missing:
-        raise BuildUnavailable(f"kernel sources not found in {SOURCE_DIR} ({', '.join(missing)})")
-    from torch.utils.cpp_extension import load
-
-    h = hashlib.sha1()
-    for name in CUDA_SOURCES + CUDA_HEADERS:
-        h.update((SOURCE_DIR / name).read_bytes())
-    try:
-        return load(name=f"ranad_rana_cuda_{h.hexdigest()[:10]}", sources=[str(SOURCE_DIR / n) for n in CUDA_SOURCES],
-                    extra_cflags=["-O3", "-std=c++20"],
-                    extra_cuda_cflags=["-O3", "-std=c++20", "-Xptxas", "-warn-spills", "--expt-relaxed-constexpr"],
-                    extra_include_paths=[str(SOURCE_DIR)], verbose=False)
-    except Exception as e:  # noqa: BLE001
-        lines = str(e).strip().splitlines() or ["unknown error"]
-        first_error = next((ln for ln in lines if "error" in ln.lower()), lines[-1])
-        raise BuildUnavailable(f"building the CUDA RaNA kernels failed: {first_error.strip()}") from e
+    return _build("CUDA", f"ranad_rana_cuda_{_sources_digest(CUDA_SOURCES + CUDA_HEADERS)}", CUDA_SOURCES,
+                  extra_cflags=["-O3", "-std=c++20"],
+                  extra_cuda_cflags=["-O3", "-std=c++20", "-Xptxas", "-warn-spills", "--expt-relaxed-constexpr"])
 
 
 @lru_cache(maxsize=None)
