@@ -33,7 +33,7 @@ def train_cmd(dataset, run, config, steps, crop, lr, seed, checkpoint_every, pro
     SMAPE on the diffuse and specular bins and on the composited colour plus SSIM on it, L1 on alpha and depth.
     Resumes from RUN/checkpoint.pt when it exists."""
     from ranad_core.model import get_config
-    from ranad_core.train.trainer import TrainConfig, spawn_local, train
+    from ranad_core.train.trainer import TrainConfig, resume_step, spawn_local, train
 
     try:
         get_config(config)
@@ -46,6 +46,10 @@ def train_cmd(dataset, run, config, steps, crop, lr, seed, checkpoint_every, pro
         spawn_local(cfg, processes)
         click.echo(f"done: {steps} steps x {processes} processes, log in {run}/train.log")
         return
-    with tqdm(total=steps, desc="train", unit="step") as bar:
+    start = resume_step(run)
+    if start >= steps:
+        click.echo(f"{run} is already at step {start} (--steps {steps}): nothing to do")
+        return
+    with tqdm(total=steps, initial=start, desc="train", unit="step") as bar:
         parts = train(cfg, bar.update)
     click.echo("done: " + " ".join(f"{k} {v:.4f}" for k, v in parts.items()))

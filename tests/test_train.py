@@ -65,6 +65,33 @@ def test_train_checkpoints_and_resumes(tmp_path):
     assert r.exit_code == 0, r.output
     assert torch.load(run / "checkpoint.pt", weights_only=False)["step"] == 6
     assert "step 6 loss" in (run / "train.log").read_text()
+    r = CliRunner().invoke(cli, args[:4] + ["--steps", "6"])
+    assert r.exit_code == 0 and "already at step 6" in r.output
+
+
+def test_optimizer_state_follows_parameters_into_new_groups():
+    """A checkpoint's optimizer state from before the learning-rate groups (one group, parameter order) lands on
+    the same parameters in the grouped optimizer; the temporal gate's group runs at 10x the rate."""
+    from ranad_core.model import feature_dim, get_config
+    from ranad_core.model.crossframe import CrossFrameRaNAD
+    from ranad_core.train.trainer import load_optimizer, param_groups
+
+    model = CrossFrameRaNAD(get_config("cpu-small-xf"), feature_dim())
+    old = torch.optim.AdamW(model.parameters(), lr=1e-3)
+    for i, p in enumerate(model.parameters()):
+        p.grad = torch.full_like(p, float(i + 1))
+    old.step()
+    groups = param_groups(model)
+    assert {g["lr_scale"] for g in groups} == {1.0, 3.0, 10.0}
+    assert all(n.startswith("temporal_gate.") for g in groups if g["lr_scale"] == 10.0 for n in g["names"])
+    new = torch.optim.AdamW(groups, lr=1e-3)
+    load_optimizer(new, old.state_dict(), model)
+    by_param = {id(p): new.state[p]["exp_avg"] for g in new.param_groups for p in g["params"]}
+    for i, (name, p) in enumerate(model.named_parameters()):
+        assert torch.allclose(by_param[id(p)], torch.full_like(p, 0.1 * (i + 1))), name
+    again = torch.optim.AdamW(param_groups(model), lr=1e-3)
+    load_optimizer(again, new.state_dict(), model)   # same groups: loaded as they are
+    assert [g["lr_scale"] for g in again.param_groups] == [g["lr_scale"] for g in groups]
 
 
 def test_train_errors(tmp_path):

@@ -29,6 +29,12 @@ from .reconstruction import KernelAttention
 MAX_OFFSET = 3                       # frames -3..+3 around the centre (windows up to 7)
 FRAME_FEATURES = 2 * MAX_OFFSET + 1
 
+# Learning-rate multipliers (by parameter-name prefix) for the parts that start as identities: the T-Mix
+# output projections at zero, the temporal gate nearly closed. AdamW moves a parameter by about the learning
+# rate per step whatever its gradient, so at the base rate a gate logit starting at -4 hardly moves
+# (cpu-small-xf-v1's first 2500 steps moved it by 0.05) and the model stays the single-frame one.
+LR_SCALE = {"temporal_gate.": 10.0, "tmix.": 3.0, "temporal.": 3.0}
+
 
 def temporal_layout(layouts: list) -> tuple[Layout, torch.Tensor]:
     """(the window's bins per pixel frame after frame as one key layout, gather rows into cat(frames))."""
@@ -86,6 +92,10 @@ class CrossFrameRaNAD(nn.Module):
         state["embed.0.weight"] = torch.cat([w, w.new_zeros(w.shape[0], FRAME_FEATURES)], 1)
         model.single.load_state_dict(state)
         return model
+
+    def lr_scale(self, name: str) -> float:
+        """Learning-rate multiplier of parameter `name` (see LR_SCALE)."""
+        return next((m for prefix, m in LR_SCALE.items() if name.startswith(prefix)), 1.0)
 
     def embeddings(self, frames: list, centre: int) -> list:
         """Per-frame backbone embeddings of the window (inputs of every frame on the centre frame's grid)."""

@@ -52,6 +52,47 @@ def learning_rate(cfg: TrainConfig, step: int) -> float:
     return lr * 0.3 ** sum(step >= int(f * cfg.steps) for f in cfg.decay_at)
 
 
+def param_groups(model) -> list:
+    """AdamW parameter groups by learning-rate multiplier (the model's `lr_scale(name)`, 1 without one); each
+    group holds its "lr_scale" and its parameter names, which is how a checkpoint's optimizer state finds its
+    parameters again when the grouping changed."""
+    scale_of = getattr(model, "lr_scale", lambda name: 1.0)
+    groups = {}
+    for name, p in model.named_parameters():
+        g = groups.setdefault(scale_of(name), {"params": [], "names": [], "lr_scale": scale_of(name)})
+        g["params"].append(p)
+        g["names"].append(name)
+    return list(groups.values())
+
+
+def load_optimizer(opt, saved: dict, model) -> None:
+    """Loads `saved` (an optimizer state dict) into `opt`, regrouping per parameter name when the groups differ
+    (checkpoints written before the groups existed hold one group in `model.named_parameters()` order)."""
+    if [g.get("names") for g in saved["param_groups"]] == [g["names"] for g in opt.param_groups]:
+        opt.load_state_dict(saved)
+        return
+    old_names = [n for g in saved["param_groups"] for n in g.get("names", [])] or \
+        [n for n, _ in model.named_parameters()]
+    old_ids = [i for g in saved["param_groups"] for i in g["params"]]
+    by_name = {n: saved["state"][i] for n, i in zip(old_names, old_ids) if i in saved["state"]}
+    state, groups, k = {}, [], 0
+    for g in opt.param_groups:
+        ids = []
+        for n in g["names"]:
+            if n in by_name:
+                state[k] = by_name[n]
+            ids.append(k)
+            k += 1
+        groups.append({**{key: v for key, v in g.items() if key != "params"}, "params": ids})
+    opt.load_state_dict({"state": state, "param_groups": groups})
+
+
+def resume_step(run: str) -> int:
+    """The step a run folder's checkpoint resumes from (0 without one)."""
+    ckpt = os.path.join(run, CHECKPOINT)
+    return int(torch.load(ckpt, weights_only=False)["step"]) if os.path.isfile(ckpt) else 0
+
+
 def save_checkpoint(path: str, model, opt, step: int, cfg: TrainConfig, rng: np.random.Generator) -> None:
     state = {"model": model.state_dict(), "optimizer": opt.state_dict(), "step": step,
              "model_config": model.config.to_dict(), "train_config": asdict(cfg), "rng": rng.bit_generator.state}
@@ -89,7 +130,7 @@ def train(cfg: TrainConfig, progress=None) -> dict:
     config = get_config(cfg.config)
     cross = config.window > 1
     model = build_model(cfg, config)
-    opt = torch.optim.AdamW(model.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay)
+    opt = torch.optim.AdamW(param_groups(model), lr=cfg.lr, weight_decay=cfg.weight_decay)
     rng = np.random.default_rng(cfg.seed if world == 1 else [cfg.seed, rank])
     step = 0
     ckpt = os.path.join(cfg.run, CHECKPOINT)
@@ -98,7 +139,7 @@ def train(cfg: TrainConfig, progress=None) -> dict:
         if state["model_config"]["name"] != cfg.config:
             raise RanadError(f"checkpoint is for config {state['model_config']['name']!r}, not {cfg.config!r}", ckpt)
         model.load_state_dict(state["model"])
-        opt.load_state_dict(state["optimizer"])
+        load_optimizer(opt, state["optimizer"], model)
         step = state["step"]
         if rank == 0:
             rng.bit_generator.state = state["rng"]
@@ -121,7 +162,7 @@ def train(cfg: TrainConfig, progress=None) -> dict:
         if noisy.layout.bins == 0:
             continue
         for g in opt.param_groups:
-            g["lr"] = learning_rate(cfg, step)
+            g["lr"] = learning_rate(cfg, step) * g["lr_scale"]
         pred = net(window, centre) if cross else net(noisy)
         loss, parts = total_loss(pred, ref.layers, noisy.layout.offsets, noisy.layout.size)
         opt.zero_grad()
