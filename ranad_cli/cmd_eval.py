@@ -90,6 +90,6 @@ def _temporal(dataset, out, loaded, cross_spec, spps, kinds, scenes, window):
     with atomic_output(os.path.join(out, "temporal.md")) as tmp:
         with open(tmp, "w") as f:
             f.write(table)
-    ev.write_csv(rows, os.path.join(out, "temporal.csv"), ("scene", "kind", "spp", "method", "flip", "temporal",
-                                                           "seconds"))
+    ev.write_csv(rows, os.path.join(out, "temporal.csv"),
+                 ("scene", "kind", "spp", "ref_spp", "method", "flip", "temporal", "seconds"))
     click.echo(table)

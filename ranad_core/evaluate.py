@@ -203,7 +203,8 @@ def evaluate_temporal(dataset: str, single, cross, spps=None, kinds=None, max_sc
                     secs["ranad-xf"] += time.perf_counter() - t
                     outs["ranad-xf"].append(metrics.flat_rgb(res.image))
                 for method in TEMPORAL_METHODS:
-                    rows.append({"scene": folder.name, "kind": kind, "spp": spp, "method": method,
+                    rows.append({"scene": folder.name, "kind": kind, "spp": spp, "ref_spp": m["ref_spp"],
+                                 "method": method,
                                  "flip": float(np.mean([metrics.flip(r, o) for r, o in zip(refs, outs[method])])),
                                  "temporal": metrics.temporal_error(outs[method], refs),
                                  "seconds": secs[method] / len(refs_at)})
@@ -222,4 +223,21 @@ def temporal_markdown(rows: list, title: str = "") -> str:
                 agg = {"spp": spp, "method": method, "n": len(sel),
                        **{k: float(np.mean([r[k] for r in sel])) for k in ("flip", "temporal", "seconds")}}
                 lines.append("| " + " | ".join(_fmt(agg[c]) for c in cols) + " |")
+    floors = reference_noise_floor(rows)
+    if floors:
+        lines += ["", "The references' own noise puts a floor under every temporal error. Estimated from the noisy "
+                  "input's, as temporal x sqrt(spp / (spp + ref_spp)): "
+                  + ", ".join(f"{f:.4f} at {spp} spp" for spp, f in floors.items()) + "."]
     return "\n".join(lines) + "\n"
+
+
+def reference_noise_floor(rows: list) -> dict:
+    """spp -> the temporal error a perfect denoiser would still score against these references, estimated from the
+    noisy input's: its frame differences differ from the reference's by the two renders' independent noise, whose
+    spread goes as 1/sqrt(samples), so the reference's share is sqrt(spp / (spp + ref_spp)) of it."""
+    out = {}
+    for spp in sorted({r["spp"] for r in rows}):
+        sel = [r for r in rows if r["spp"] == spp and r["method"] == "noisy" and "ref_spp" in r]
+        if sel:
+            out[spp] = float(np.mean([r["temporal"] * np.sqrt(spp / (spp + r["ref_spp"])) for r in sel]))
+    return out

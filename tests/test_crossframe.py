@@ -186,6 +186,8 @@ def test_temporal_eval_compares_single_and_cross_frame(tmp_path):
     assert set(rows) == {"noisy", "oidn", "ranad", "ranad-xf"}
     assert all(float(rows[k]["temporal"]) >= 0 for k in rows)
     assert float(rows["ranad-xf"]["seconds"]) > 0 and "| 16 | ranad-xf | 1 |" in r.output
+    floor = float(rows["noisy"]["temporal"]) * np.sqrt(16 / (16 + m["ref_spp"]))
+    assert f"{floor:.4f} at 16 spp" in r.output
     r = CliRunner().invoke(cli, ["eval", str(SHOT.parent), "-o", str(out), "--temporal", "--model", paths["single"],
                                  "--cross-model", paths["cross"]])
     assert r.exit_code == 2
