@@ -32,7 +32,7 @@ FRAME_FEATURES = 2 * MAX_OFFSET + 1
 # Learning-rate multipliers (by parameter-name prefix) for the parts that start as identities: the T-Mix
 # output projections at zero, the temporal gate nearly closed. AdamW moves a parameter by about the learning
 # rate per step whatever its gradient, so at the base rate a gate logit starting at -4 hardly moves
-# (cpu-small-xf-v1's first 2500 steps moved it by 0.05) and the model stays the single-frame one.
+# (cpu-small-xf-v1's first 2500 steps moved it by at most 0.06) and the model stays the single-frame one.
 LR_SCALE = {"temporal_gate.": 10.0, "tmix.": 3.0, "temporal.": 3.0}
 
 
