@@ -109,75 +109,93 @@ RANA_HD V vmax(V a, V b) {
   return a > b ? a : b;
 }
 
-// exp for float, branch-free (Cephes-style range reduction + degree-6 polynomial, ~2 ulp); inputs below -87
-// give exactly 0, so masked logits of -inf vanish. double uses std::exp (gradcheck only).
-RANA_HD float fast_exp(float x) {
-  const float lo = -87.0f, hi = 88.0f;
-  const bool under = x < lo;
-  x = x < lo ? lo : (x > hi ? hi : x);
-  const float n = std::floor(x * 1.44269504088896341f + 0.5f);
-  float r = x - n * 0.693359375f;
-  r = r + n * 2.12194440e-4f;
-  float p = 1.9875691500e-4f;
-  p = p * r + 1.3981999507e-3f;
-  p = p * r + 8.3334519073e-3f;
-  p = p * r + 4.1665795894e-2f;
-  p = p * r + 1.6666665459e-1f;
-  p = p * r + 5.0000001201e-1f;
-  p = p * r * r + r + 1.0f;
+// Logits are kept in base-2 units (q scaled by scale * log2(e), the bias table by log2(e)), so the softmax needs
+// exp2, which has no range-reduction multiply and an exact reduction: n = round(x), f = x - n, 2^f by a degree-5
+// polynomial on [-1/2, 1/2] (relative error 2.3e-7 in float), then scaled by 2^n. Inputs below -125 give exactly 0,
+// so masked logits of -inf vanish (and no result is subnormal). double uses std::exp2 (gradient checks only).
+constexpr double kLog2e = 1.4426950408889634074;
+constexpr double kLn2 = 0.6931471805599453094;
+#define RANA_EXP2_POLY(f)                                                                                      \
+  ((((((1.3266970636323094e-3f) * (f) + 9.675459936261177e-3f) * (f) + 5.550742521882057e-2f) * (f) +         \
+     2.4022121727466583e-1f) * (f) + 6.931469440460205e-1f) * (f) + 1.0000001192092896f)
+RANA_HD float fast_exp2(float x) {
+#if defined(__CUDA_ARCH__)
+  return x < -125.0f ? 0.0f : exp2f(x);
+#else
+  const bool under = x < -125.0f;
+  x = under ? -125.0f : x;
+  const float n = std::floor(x + 0.5f), f = x - n;
+  const float p = RANA_EXP2_POLY(f);
   int32_t bits = (int32_t(n) + 127) << 23;
   float scale;
   std::memcpy(&scale, &bits, sizeof(scale));
   return under ? 0.0f : p * scale;
+#endif
 }
-RANA_HD double fast_exp(double x) { return std::exp(x); }
+RANA_HD double fast_exp2(double x) { return std::exp2(x); }
 #if !defined(__CUDACC__)
-inline f32x16 fast_exp(f32x16 x) {  // the same steps on 16 lanes
-#if defined(__AVX512F__)
-  // AVX-512: round and scale in one instruction each (vrndscaleps, vscalefps). Inputs below -87 give exactly 0
-  // through a mask, not through underflow (an underflowing vscalefps costs a microcode assist per instruction).
-  const __mmask16 keep = _mm512_cmp_ps_mask(reinterpret_cast<const __m512&>(x), _mm512_set1_ps(-87.0f), _CMP_GE_OQ);
-  __m512 v = _mm512_min_ps(_mm512_max_ps(reinterpret_cast<const __m512&>(x), _mm512_set1_ps(-87.0f)),
-                           _mm512_set1_ps(88.0f));
-  const __m512 n = _mm512_roundscale_ps(_mm512_mul_ps(v, _mm512_set1_ps(1.44269504088896341f)),
-                                        _MM_FROUND_TO_NEAREST_INT | _MM_FROUND_NO_EXC);
-  __m512 r = _mm512_fnmadd_ps(n, _mm512_set1_ps(0.693359375f), v);
-  r = _mm512_fnmadd_ps(n, _mm512_set1_ps(-2.12194440e-4f), r);
-  __m512 p = _mm512_set1_ps(1.9875691500e-4f);
-  p = _mm512_fmadd_ps(p, r, _mm512_set1_ps(1.3981999507e-3f));
-  p = _mm512_fmadd_ps(p, r, _mm512_set1_ps(8.3334519073e-3f));
-  p = _mm512_fmadd_ps(p, r, _mm512_set1_ps(4.1665795894e-2f));
-  p = _mm512_fmadd_ps(p, r, _mm512_set1_ps(1.6666665459e-1f));
-  p = _mm512_fmadd_ps(p, r, _mm512_set1_ps(5.0000001201e-1f));
-  p = _mm512_fmadd_ps(_mm512_mul_ps(p, r), r, _mm512_add_ps(r, _mm512_set1_ps(1.0f)));
+inline f32x16 fast_exp2(f32x16 x) {  // the same steps on 16 lanes
+#if defined(__AVX512F__) && defined(__AVX512DQ__)
+  // AVX-512: vreduceps gives f = x - round(x) in one instruction, vscalefps the 2^n. The mask zeroes inputs below
+  // -125 (an underflowing vscalefps would cost a microcode assist per instruction).
+  const __m512 xv = reinterpret_cast<const __m512&>(x);
+  const __mmask16 keep = _mm512_cmp_ps_mask(xv, _mm512_set1_ps(-125.0f), _CMP_GE_OQ);
+  const __m512 v = _mm512_max_ps(xv, _mm512_set1_ps(-125.0f));
+  const __m512 f = _mm512_reduce_ps(v, _MM_FROUND_TO_NEAREST_INT | _MM_FROUND_NO_EXC);
+  const __m512 n = _mm512_sub_ps(v, f);
+  __m512 p = _mm512_fmadd_ps(_mm512_set1_ps(1.3266970636323094e-3f), f, _mm512_set1_ps(9.675459936261177e-3f));
+  p = _mm512_fmadd_ps(p, f, _mm512_set1_ps(5.550742521882057e-2f));
+  p = _mm512_fmadd_ps(p, f, _mm512_set1_ps(2.4022121727466583e-1f));
+  p = _mm512_fmadd_ps(p, f, _mm512_set1_ps(6.931469440460205e-1f));
+  p = _mm512_fmadd_ps(p, f, _mm512_set1_ps(1.0000001192092896f));
   const __m512 e = _mm512_maskz_scalef_ps(keep, p, n);
   return reinterpret_cast<const f32x16&>(e);
 #else
-  const i32x16 under = x < -87.0f;
-  x = x < -87.0f ? splat<f32x16>(-87.0f) : x;
-  x = x > 88.0f ? splat<f32x16>(88.0f) : x;
-  const f32x16 y = x * 1.44269504088896341f + 0.5f;
+  const i32x16 under = x < -125.0f;
+  x = under ? splat<f32x16>(-125.0f) : x;
+  const f32x16 y = x + 0.5f;
   f32x16 n = __builtin_convertvector(__builtin_convertvector(y, i32x16), f32x16);  // truncation, then floor
   n = n > y ? n - 1.0f : n;
-  f32x16 r = x - n * 0.693359375f;
-  r = r + n * 2.12194440e-4f;
-  f32x16 p = splat<f32x16>(1.9875691500e-4f);
-  p = p * r + 1.3981999507e-3f;
-  p = p * r + 8.3334519073e-3f;
-  p = p * r + 4.1665795894e-2f;
-  p = p * r + 1.6666665459e-1f;
-  p = p * r + 5.0000001201e-1f;
-  p = p * r * r + r + 1.0f;
+  const f32x16 f = x - n;
+  const f32x16 p = RANA_EXP2_POLY(f);
   const i32x16 bits = (__builtin_convertvector(n, i32x16) + 127) << 23;
   const f32x16 e = p * reinterpret_cast<const f32x16&>(bits);
   return under ? splat<f32x16>(0.0f) : e;
 #endif
 }
-inline f64x8 fast_exp(f64x8 x) {
-  for (int i = 0; i < 8; ++i) x[i] = std::exp(x[i]);
+inline f64x8 fast_exp2(f64x8 x) {
+  for (int i = 0; i < 8; ++i) x[i] = std::exp2(x[i]);
   return x;
 }
 #endif
+
+// log2 of positive lanes (the forward's log-sum-exp, once per block). AVX-512: exponent and mantissa in [3/4, 3/2)
+// by vgetexp/vgetmant, then log2(m) = 2/ln2 atanh(t), t = (m - 1)/(m + 1) in (-1/7, 1/5], to t^9 (error < 3e-9).
+template <typename V>
+RANA_HD V fast_log2(V x) {
+  if constexpr (Lanes<V>::L == 1) {
+    return std::log2(x);
+  } else {
+#if defined(__AVX512F__) && !defined(__CUDACC__)
+    if constexpr (Lanes<V>::L == 16 && sizeof(typename Lanes<V>::T) == 4) {
+      const __m512 v = reinterpret_cast<const __m512&>(x), one = _mm512_set1_ps(1.0f);
+      const __m512 m = _mm512_getmant_ps(v, _MM_MANT_NORM_p75_1p5, _MM_MANT_SIGN_zero);
+      __m512 k = _mm512_getexp_ps(v);
+      k = _mm512_mask_add_ps(k, _mm512_cmp_ps_mask(m, one, _CMP_LT_OQ), k, one);  // m = mantissa / 2
+      const __m512 t = _mm512_div_ps(_mm512_sub_ps(m, one), _mm512_add_ps(m, one)), t2 = _mm512_mul_ps(t, t);
+      __m512 p = _mm512_set1_ps(float(2 * kLog2e / 9));
+      p = _mm512_fmadd_ps(p, t2, _mm512_set1_ps(float(2 * kLog2e / 7)));
+      p = _mm512_fmadd_ps(p, t2, _mm512_set1_ps(float(2 * kLog2e / 5)));
+      p = _mm512_fmadd_ps(p, t2, _mm512_set1_ps(float(2 * kLog2e / 3)));
+      p = _mm512_fmadd_ps(p, t2, _mm512_set1_ps(float(2 * kLog2e)));
+      const __m512 r = _mm512_fmadd_ps(p, t, k);
+      return reinterpret_cast<const V&>(r);
+    }
+#endif
+    for (int i = 0; i < Lanes<V>::L; ++i) x[i] = std::log2(x[i]);
+    return x;
+  }
+}
 
 // Makes the compiler keep an array in memory (its address escapes) so that it does not hold it in registers
 // through a loop that needs them for something else; the accumulators are loaded once per buffer step.
@@ -214,7 +232,8 @@ RANA_HD int table_width(int R) { return 2 * (R + kMaxSpan) + 1; }
 RANA_HD int table_centre(int R) { return R + kMaxSpan; }
 
 // The mask-and-bias table: [H][rows.n][tw] then one row of -inf (for lanes past a block's end).
-// Entry (h, r, centre + dx) is bias[h, dy_r + R, dx + R] (or 0 without bias) for dx0_r <= dx <= dx1_r, else -inf.
+// Entry (h, r, centre + dx) is bias[h, dy_r + R, dx + R] * log2(e) (or 0 without bias) for dx0_r <= dx <= dx1_r,
+// else -inf: logits are in base-2 units (see fast_exp2).
 template <typename T>
 RANA_HD void fill_table(const DiscRows& rows, const T* bias, int H, T* tab) {
   const int tw = table_width(rows.R), o = table_centre(rows.R), side = 2 * rows.R + 1;
@@ -224,7 +243,7 @@ RANA_HD void fill_table(const DiscRows& rows, const T* bias, int H, T* tab) {
         const int dx = m - o;
         T val = neg_inf<T>();
         if (h < H && dx >= rows.dx0[r] && dx <= rows.dx1[r])
-          val = bias ? bias[(h * side + rows.dy[r] + rows.R) * side + dx + rows.R] : T(0);
+          val = bias ? T(bias[(h * side + rows.dy[r] + rows.R) * side + dx + rows.R] * kLog2e) : T(0);
         tab[(int64_t(h) * rows.n + r) * tw + m] = val;
       }
 }
@@ -271,7 +290,7 @@ RANA_HD LaneTable<L> lane_table(const Block<L / HB>& b, const DiscRows& rows, in
 }
 
 // Permute tables for blocks of 4 heads with R <= 3 (side <= 8): [H / 4][rows.n][32], entry 8 * hl + dx + R of
-// (group g, row r) = bias[4 g + hl, dy_r + R, dx + R] (0 without bias or beyond the side). One vpermt2ps then gives
+// (group g, row r) = bias[4 g + hl, dy_r + R, dx + R] * log2(e) (0 without bias or beyond the side). One vpermt2ps then gives
 // a key pixel's bias for all 16 lanes, and two compares give its mask, instead of a 16-lane gather per pixel.
 template <typename T>
 RANA_HD void fill_permute_table(const DiscRows& rows, const T* bias, int H, T* ptab) {
@@ -281,7 +300,7 @@ RANA_HD void fill_permute_table(const DiscRows& rows, const T* bias, int H, T* p
       for (int e = 0; e < 32; ++e) {
         const int h = 4 * g + e / 8, m = e % 8;
         ptab[(g * rows.n + r) * 32 + e] =
-            bias && m < side ? bias[(h * side + rows.dy[r] + rows.R) * side + m] : T(0);
+            bias && m < side ? T(bias[(h * side + rows.dy[r] + rows.R) * side + m] * kLog2e) : T(0);
       }
 }
 
@@ -357,11 +376,25 @@ struct PixelRun {
 // Most runs a walk of one block can produce: every disc row, its widest span of pixels.
 RANA_HD int max_runs(const DiscRows& rows) { return rows.n * (2 * rows.R + 2 + kMaxSpan); }
 
-template <typename W>
-RANA_HD int record_runs(W walk, PixelRun* runs) {
+// Records the walk's runs (the same runs, in the same order, as PixelWalk::next gives). Branch-free per pixel: each
+// pixel's run is written and kept only when it is non-empty, as empty pixels come at random.
+RANA_HD int record_runs(const PixelWalk& w, PixelRun* runs) {
   int n = 0;
-  PixelRun p;
-  while (walk.next(p.r, p.x, p.first, p.last)) runs[n++] = p;
+  for (int r = 0; r < w.rows.n; ++r) {
+    const int64_t py = w.y + w.sign * w.rows.dy[r];
+    if (py < 0 || py >= w.g.Hk) continue;
+    const int64_t a = w.sign > 0 ? w.x0 + w.rows.dx0[r] : w.x0 - w.rows.dx1[r];
+    const int64_t b = w.sign > 0 ? w.x0 + w.span + w.rows.dx1[r] : w.x0 + w.span - w.rows.dx0[r];
+    const int64_t px0 = a < 0 ? 0 : a, px1 = b > w.g.Wk - 1 ? w.g.Wk - 1 : b;
+    const int64_t* row = w.ptr + py * w.g.Wk;
+    int64_t first = px0 <= px1 ? row[px0] : 0;
+    for (int64_t px = px0; px <= px1; ++px) {
+      const int64_t last = row[px + 1];
+      runs[n] = PixelRun{r, int32_t(px - w.x0), first, last};
+      n += first < last;
+      first = last;
+    }
+  }
   return n;
 }
 
@@ -388,9 +421,11 @@ struct Op {
   DiscRows rows;
   const T* tab;  // fill_table
   int H, dk, dv;
-  T scale;
+  T scale;                  // the softmax scale, 1 / sqrt(d)
   const T* ptab = nullptr;  // fill_permute_table, for blocks of 4 heads (optional)
   bool has_bias = false;
+  // the factor applied to q (or k) for logits in base-2 units (see fast_exp2); gradients use scale itself
+  RANA_HD T logit_scale() const { return T(scale * kLog2e); }
 };
 
 // A [N, H, d] operand read per entry (queries of a block, keys of a key block): element (n, h, c) at
@@ -565,7 +600,7 @@ RANA_HD void forward_block(const Op<typename Lanes<V>::T>& op, const Block<Lanes
   using T = typename Lanes<V>::T;
   const int H = op.H;
   V qr[DK], acc_mem[DV];
-  load_lanes<V, HB, DK>(q, b, h0, op.scale, qr);
+  load_lanes<V, HB, DK>(q, b, h0, op.logit_scale(), qr);
   RANA_UNROLL
   for (int c = 0; c < DV; ++c) acc_mem[c] = splat<V>(0);
   keep_in_memory(acc_mem);
@@ -590,14 +625,14 @@ RANA_HD void forward_block(const Op<typename Lanes<V>::T>& op, const Block<Lanes
     const V mx = vmax(vmax(mx0, mx1), vmax(mx2, mx3));
     const V mn = vmax(m, mx);
     const V base = mn == neg_inf<T>() ? splat<V>(0) : mn;  // lanes with nothing yet: exp(-inf - 0) = 0
-    const V corr = fast_exp(m - base);
+    const V corr = fast_exp2(m - base);
     l *= corr;
     RANA_UNROLL
     for (int c = 0; c < DV; ++c) acc[c] *= corr;
     // two loops: the exp chains are long, and a loop of only exps keeps many in flight
     V sum = splat<V>(0);
     for (int i = 0; i < nb; ++i) {
-      s[i] = fast_exp(s[i] - base);
+      s[i] = fast_exp2(s[i] - base);
       sum += s[i];
     }
     l += sum;
@@ -613,8 +648,9 @@ RANA_HD void forward_block(const Op<typename Lanes<V>::T>& op, const Block<Lanes
   RANA_UNROLL
   for (int c = 0; c < DV; ++c) acc_mem[c] *= inv;
   store_lanes<V, HB, DV>(acc_mem, b, h0, Output<T>{out, int64_t(H) * DV, DV, 1});
+  const V lse_v = (m + fast_log2(l + empty)) * T(kLn2);  // natural units
   for (int i = 0; i < b.n * HB; ++i)
-    lse[b.id[i / HB] * H + h0 + i % HB] = lane(l, i) == T(0) ? neg_inf<T>() : lane(m, i) + std::log(lane(l, i));
+    lse[b.id[i / HB] * H + h0 + i % HB] = lane(l, i) == T(0) ? neg_inf<T>() : lane(lse_v, i);
 }
 
 // ---- backward, dQ: one query block, heads h0 .. h0 + HB - 1 ----------------------------------------------
@@ -631,11 +667,11 @@ RANA_HD void backward_dq_block(const Op<typename Lanes<V>::T>& op, const Block<L
   using T = typename Lanes<V>::T;
   const int H = op.H;
   V qr[DK], acc_mem[DK];
-  load_lanes<V, HB, DK>(q, b, h0, op.scale, qr);
+  load_lanes<V, HB, DK>(q, b, h0, op.logit_scale(), qr);
   RANA_UNROLL
   for (int c = 0; c < DK; ++c) acc_mem[c] = splat<V>(0);
   keep_in_memory(acc_mem);
-  const V L = load_lane_scalars<V, HB>(lse, b, h0, H, T(INFINITY));
+  const V L = load_lane_scalars<V, HB>(lse, b, h0, H, T(INFINITY)) * T(kLog2e);  // base-2 units
   const V D = load_lane_scalars<V, HB>(delta, b, h0, H, T(0));
   V s[NB];
   int64_t key[NB];
@@ -645,7 +681,7 @@ RANA_HD void backward_dq_block(const Op<typename Lanes<V>::T>& op, const Block<L
       load_lanes<V, HB, DV>(dout, b, h0, T(1), dr);
       for (int i = 0; i < nb; ++i) {
         const V dp = dot_rows<V, HB, DV>(dr, vt + key[i] * DV * H + h0, H, splat<V>(0));
-        s[i] = fast_exp(s[i] - L) * (dp - D);
+        s[i] = fast_exp2(s[i] - L) * (dp - D);
       }
     }
     V acc[DK];
@@ -696,7 +732,7 @@ RANA_HD void backward_dkdv_block(const Op<typename Lanes<V>::T>& op, const Block
       load_lanes<V, HB, DV>(v, b, h0, T(1), vr);
       for (int i = 0; i < nb; ++i) {
         const V dp = dot_rows<V, HB, DV>(vr, dost + qid[i] * DV * H + h0, H, splat<V>(0));
-        const V pi = fast_exp(s[i] - load_chunk<V, HB>(lse_s + qid[i] * H + h0));
+        const V pi = fast_exp2(s[i] - load_chunk<V, HB>(lse_s + qid[i] * H + h0) * T(kLog2e));
         p[i] = pi;
         s[i] = pi * (dp - load_chunk<V, HB>(delta_s + qid[i] * H + h0));
       }
@@ -736,7 +772,7 @@ RANA_HD void backward_dkdv_block(const Op<typename Lanes<V>::T>& op, const Block
   int nb = 0;
   {
     V kr[DK];
-    load_lanes<V, HB, DK>(k, b, h0, op.scale, kr);
+    load_lanes<V, HB, DK>(k, b, h0, op.logit_scale(), kr);
     int r;
     int32_t x;
     int64_t first, last;
