@@ -44,10 +44,17 @@ rana::Output<T> output(torch::Tensor& x) {
   return rana::Output<T>{x.data_ptr<T>(), x.stride(0), x.stride(1), x.stride(2)};
 }
 
-// An [n, H, d] gradient in the layout of its input (autograd would otherwise copy it into that layout).
+// An [n, H, d] gradient in the layout of its input (autograd would otherwise copy it into that layout), allocated
+// by empty(sizes, options).
+template <typename Empty>
+torch::Tensor empty_like_layout(const torch::Tensor& like, int64_t n, int64_t H, int64_t d, Empty&& empty) {
+  if (is_channel_major(like)) return empty({n, d, H}, like.options()).transpose(1, 2);
+  return empty({n, H, d}, like.options());
+}
 inline torch::Tensor empty_like_layout(const torch::Tensor& like, int64_t n, int64_t H, int64_t d) {
-  if (is_channel_major(like)) return torch::empty({n, d, H}, like.options()).transpose(1, 2);
-  return torch::empty({n, H, d}, like.options());
+  return empty_like_layout(like, n, H, d, [](at::IntArrayRef s, const torch::TensorOptions& o) {
+    return torch::empty(s, o);
+  });
 }
 
 // How a call runs: heads per block, and the padded sizes the kernels are compiled for.

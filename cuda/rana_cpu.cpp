@@ -5,6 +5,7 @@
 #include <vector>
 
 #include "rana_binding.h"
+#include "rana_cpu_buffers.h"
 #include "rana_cpu_kernels.h"
 
 namespace {
@@ -31,7 +32,7 @@ torch::Tensor channel_major(const torch::Tensor& x) {
   if (is_channel_major(x)) return x.transpose(1, 2);
   const auto xc = x.contiguous();
   const int64_t n = x.size(0), H = x.size(1), d = x.size(2);
-  auto out = torch::empty({n, d, H}, x.options());
+  auto out = rana_cpu_buffers::empty({n, d, H}, x.options());
   AT_DISPATCH_FLOATING_TYPES(x.scalar_type(), "channel_major", [&] {
     const scalar_t* src = xc.data_ptr<scalar_t>();
     scalar_t* dst = out.data_ptr<scalar_t>();
@@ -123,7 +124,7 @@ std::vector<torch::Tensor> rana_forward(torch::Tensor q, torch::Tensor k, torch:
   const QueryOrder qo = order_queries(q_pixels, Hk, Wk);
   const auto qp = pad_to(q, pl.H, pl.dk);
   const auto kt = channel_major(pad_to(k, pl.H, pl.dk)), vt = channel_major(pad_to(v, pl.H, pl.dv));
-  auto out = torch::empty({nq, pl.H, pl.dv}, q.options());
+  auto out = rana_cpu_buffers::empty({nq, pl.H, pl.dv}, q.options());
   auto lse = torch::empty({nq, pl.H}, q.options());
   AT_DISPATCH_FLOATING_TYPES(q.scalar_type(), "rana_forward", [&] {
     using T = scalar_t;
@@ -153,9 +154,10 @@ std::vector<torch::Tensor> rana_backward(torch::Tensor dout, torch::Tensor q, to
   const auto lse_pos = pad_heads(torch::where(torch::isinf(lse), torch::full_like(lse, INFINITY), lse), pl.H,
                                  INFINITY);
   const auto delta_p = pad_heads(delta, pl.H, 0.0);
-  auto dq = empty_like_layout(qp, qp.size(0), pl.H, pl.dk);
-  auto dk_t = empty_like_layout(kp, kp.size(0), pl.H, pl.dk);
-  auto dv_t = empty_like_layout(vp, vp.size(0), pl.H, pl.dv);
+  const auto cached = [](at::IntArrayRef s, const torch::TensorOptions& o) { return rana_cpu_buffers::empty(s, o); };
+  auto dq = empty_like_layout(qp, qp.size(0), pl.H, pl.dk, cached);
+  auto dk_t = empty_like_layout(kp, kp.size(0), pl.H, pl.dk, cached);
+  auto dv_t = empty_like_layout(vp, vp.size(0), pl.H, pl.dv, cached);
   const int64_t side = 2 * R + 1;
   auto dbias = need_dbias ? torch::empty({pl.H, side, side}, q.options()) : torch::Tensor();
   AT_DISPATCH_FLOATING_TYPES(q.scalar_type(), "rana_backward", [&] {

@@ -202,6 +202,28 @@ def test_deterministic_across_runs_and_threads():
             assert torch.equal(x, y)
 
 
+def test_large_outputs_reuse_freed_buffers_only():
+    """Outputs of 32 MiB and more come from the kernels' buffer cache (cuda/rana_cpu_buffers.h): a freed output's
+    buffer is taken by the next call, a live output's never is, and a reused buffer holds exactly the new result."""
+    side = 210
+    offs = torch.cat([torch.zeros(1, dtype=torch.int64), torch.full((side * side,), 3).cumsum(0)])
+    qp, ko, ks = self_attention_layout(offs, side, side)
+    g = torch.Generator().manual_seed(9)
+    q, k, v = (torch.randn(int(offs[-1]), 16, 4, generator=g).transpose(1, 2) for _ in range(3))
+    first = rana(q, k, v, qp, ko, ks, 1.5, backend="cpu")
+    assert first.numel() * first.element_size() >= 32 << 20  # large enough for the cache
+    keep = first.clone()
+    second = rana(q, k, v, qp, ko, ks, 1.5, backend="cpu")
+    assert second.data_ptr() != first.data_ptr()
+    assert torch.equal(first, keep) and torch.equal(second, keep)
+    freed = {first.data_ptr(), second.data_ptr()}
+    del first, second
+    doubled = rana(q, k, v * 2, qp, ko, ks, 1.5, backend="cpu")  # softmax weights unchanged, values doubled
+    assert doubled.data_ptr() in freed
+    assert torch.equal(doubled, 2 * keep)
+    torch.testing.assert_close(keep, rana(q, k, v, qp, ko, ks, 1.5, backend="reference"), atol=1e-5, rtol=1e-5)
+
+
 def test_custom_op_registration():
     q, k, v, qp, ko, ks, bias = _inputs("self", 1.5, True, torch.float32)
     args = (q.requires_grad_(True), k.requires_grad_(True), v, qp, ko, ks[0], ks[1], 1.5, bias.requires_grad_(True))

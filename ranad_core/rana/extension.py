@@ -19,7 +19,7 @@ from pathlib import Path
 SOURCE_DIR = Path(__file__).resolve().parents[2] / "cuda"
 # the bindings, and the kernel instantiations split so that the build runs them in parallel
 CPU_SOURCES = ("rana_cpu.cpp", "rana_cpu_f32_hb4.cpp", "rana_cpu_f32_hb1.cpp", "rana_cpu_other.cpp")
-CPU_HEADERS = ("rana_math.h", "rana_binding.h", "rana_cpu_kernels.h")
+CPU_HEADERS = ("rana_math.h", "rana_binding.h", "rana_cpu_kernels.h", "rana_cpu_buffers.h")
 
 
 def _cpu_tag() -> str:

