@@ -5,7 +5,8 @@ channels. Prints forward and forward+backward time, query-key pairs per second, 
 pair per head, the usual attention count: q.k and p.v, multiply and add), peak memory of the process, and
 the speed-up over the reference on a size the reference can handle (``--ref-size``).
 Torch's allocator is asked for transparent huge pages, as the ranad CLI does (THP_MEM_ALLOC_ENABLE=0 to compare).
-Usage: python bench/rana.py [--size 512 --radius 3.5 --heads 4 --dim 16 --threads N]
+Both memory layouts of q, k, v are measured at --size (see problem()).
+Usage: python bench/rana.py [--size 512 --radius 3.5 --heads 4 --dim 16 --threads N --layout both --repeats 5]
 """
 
 from __future__ import annotations
@@ -77,9 +78,9 @@ def run(size, radius, heads, dim, backend, repeats, layout="natural"):
     fwd = best_of(timed_fwd, repeats)
     qg, kg, vg, bg = (t.detach().requires_grad_(True) for t in (q, k, v, bias))
 
-    def fwd_bwd():
+    def fwd_bwd():  # the gradients returned, not accumulated into .grad (as a training step with zeroed grads)
         out = rana(qg, kg, vg, qp, ko, ks, radius, bg, backend=backend)
-        out.backward(torch.ones_like(out))
+        torch.autograd.grad(out, (qg, kg, vg, bg), torch.ones_like(out))
         sync()
 
     both = best_of(fwd_bwd, repeats)
@@ -94,33 +95,36 @@ def main() -> None:
     ap.add_argument("--heads", type=int, default=4)
     ap.add_argument("--dim", type=int, default=16)
     ap.add_argument("--threads", type=int, default=torch.get_num_threads())
-    ap.add_argument("--repeats", type=int, default=3)
-    ap.add_argument("--layout", choices=("natural", "channel-major"), default="natural",
-                    help="memory layout of q, k, v (both are [N, heads, d] tensors; see problem())")
+    ap.add_argument("--repeats", type=int, default=5)
+    ap.add_argument("--layout", choices=("natural", "channel-major", "both"), default="both",
+                    help="memory layout of q, k, v at --size (both are [N, heads, d] tensors; see problem()); "
+                         "channel-major is what the model's projections write, natural needs two copies per call")
     args = ap.parse_args()
     torch.set_num_threads(args.threads)
     flop = 4 * args.dim * args.heads
+    layouts = ("channel-major", "natural") if args.layout == "both" else (args.layout,)
     print(f"RaNA bench: radius {args.radius}, {args.heads} heads x {args.dim}, {args.threads} threads, "
-          f"{args.layout} q/k/v, torch {torch.__version__}")
+          f"best of {args.repeats}, torch {torch.__version__}")
     rows = []
-    for label, size, backend in (("C++ kernels", args.size, "cpu"), ("C++ kernels", args.ref_size, "cpu"),
-                                 ("reference", args.ref_size, "reference")):
-        fwd, both, pairs, bins = run(size, args.radius, args.heads, args.dim, backend, args.repeats, args.layout)
+    runs = [("C++ kernels", args.size, "cpu", layout) for layout in layouts]
+    runs += [("C++ kernels", args.ref_size, "cpu", "natural"), ("reference", args.ref_size, "reference", "natural")]
+    for label, size, backend, layout in runs:
+        fwd, both, pairs, bins = run(size, args.radius, args.heads, args.dim, backend, args.repeats, layout)
         rows.append((label, size, fwd, both, pairs))
         if backend == "cpu" and size == args.size:
             peak_cpp = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
-        print(f"{label:12s} {size}x{size} ({bins} bins, {pairs / 1e6:.1f} M pairs): "
+        print(f"{label:12s} {size}x{size} {layout:13s} ({bins} bins, {pairs / 1e6:.1f} M pairs): "
               f"forward {fwd * 1e3:8.1f} ms = {pairs / fwd / 1e6:6.1f} M pairs/s, {pairs * flop / fwd / 1e9:5.1f} "
               f"GFLOP/s | forward+backward {both * 1e3:8.1f} ms = {pairs / both / 1e6:6.1f} M pairs/s")
     if torch.cuda.is_available():  # the CUDA kernels on the GPU present, same problem
-        fwd, both, pairs, bins = run(args.size, args.radius, args.heads, args.dim, "cuda", args.repeats, args.layout)
+        fwd, both, pairs, bins = run(args.size, args.radius, args.heads, args.dim, "cuda", args.repeats, layouts[0])
         print(f"CUDA kernels {args.size}x{args.size} on {torch.cuda.get_device_name()}: forward {fwd * 1e3:8.2f} ms = "
               f"{pairs / fwd / 1e6:7.1f} M pairs/s | forward+backward {both * 1e3:8.2f} ms = "
               f"{pairs / both / 1e6:7.1f} M pairs/s ({rows[0][2] / fwd:.1f}x / {rows[0][3] / both:.1f}x the CPU run)")
     else:
         print("CUDA kernels: not measured (no GPU here)")
-    _, _, f_small, b_small, _ = rows[1]
-    _, _, f_ref, b_ref, _ = rows[2]
+    _, _, f_small, b_small, _ = rows[-2]
+    _, _, f_ref, b_ref, _ = rows[-1]
     print(f"speed-up over the reference at {args.ref_size}x{args.ref_size}: forward {f_ref / f_small:.0f}x, "
           f"forward+backward {b_ref / b_small:.0f}x")
     print(f"peak resident memory: {peak_cpp:.0f} MB after the C++ runs at {args.size}x{args.size}, "
