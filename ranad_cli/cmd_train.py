@@ -27,8 +27,12 @@ from tqdm import tqdm
               help="Cross-frame configs (e.g. cpu-small-xf): frames per training window around the centre.")
 @click.option("--init", default=None,
               help="Cross-frame configs: single-frame weights to start from (model name, .safetensors or run).")
+@click.option("--temporal-weight", default=0.0, show_default=True, type=click.FloatRange(0),
+              help="Cross-frame configs: weight of a temporal loss on two consecutive frames per step (each denoised "
+                   "with its own window): the change of the flattened result from one frame to the next against the "
+                   "reference's. Needs references on every frame (`ranad synth --ref-frames all`).")
 def train_cmd(dataset, run, config, steps, crop, lr, seed, checkpoint_every, processes, p_no_aux, p_no_split, window,
-              init):
+              init, temporal_weight):
     """Train on DATASET (the output of `ranad synth`): centre-frame pairs, random crops, flips and transposes,
     SMAPE on the diffuse and specular bins and on the composited colour plus SSIM on it, L1 on alpha and depth.
     Resumes from RUN/checkpoint.pt when it exists."""
@@ -41,7 +45,7 @@ def train_cmd(dataset, run, config, steps, crop, lr, seed, checkpoint_every, pro
         raise click.BadParameter(str(e), param_hint="--config") from None
     cfg = TrainConfig(dataset=dataset, run=run, config=config, steps=steps, crop=crop, lr=lr, seed=seed,
                       checkpoint_every=checkpoint_every, p_no_aux=p_no_aux, p_no_split=p_no_split,
-                      window=window, init=init)
+                      window=window, init=init, temporal_weight=temporal_weight)
     if processes > 1:
         spawn_local(cfg, processes)
         click.echo(f"done: {steps} steps x {processes} processes, log in {run}/train.log")

@@ -12,7 +12,8 @@ from click.testing import CliRunner
 
 from ranad_cli.main import cli
 from ranad_core.exr import read_deep
-from ranad_core.train.data import find_pairs, sample, transform
+from ranad_core.train.data import find_frame_pairs, find_pairs, sample, sample_consecutive, transform
+from ranad_core.train.losses import temporal_loss
 
 SHOT = Path(__file__).resolve().parents[1] / "examples" / "synth_shot"
 
@@ -148,3 +149,53 @@ def test_reduced_modes_keep_the_radiance():
     assert float(red.layers["specular"].abs().max()) == 0
     n3, r3 = reduce_inputs(noisy, ref, np.random.default_rng(0), 0.0, 0.0)
     assert n3 is noisy and r3 is ref
+
+
+def sequence_dataset(root: Path) -> Path:
+    """The example shot with a reference on every frame (frames 0 and 2 use their noisy image as reference: the
+    same bin layout, which is all the temporal loss's plumbing needs)."""
+    ds = dataset_from_example(root)
+    scene = ds / "scene_0000"
+    for t in (0, 2):
+        shutil.copy(scene / "deepoid" / f"noisy_spp16.{t:04d}.exr", scene / "deepoid" / f"reference_spp16.{t:04d}.exr")
+    m = json.loads((scene / "manifest.json").read_text())
+    m["reference_frames"] = [0, 1, 2]
+    (scene / "manifest.json").write_text(json.dumps(m))
+    return ds
+
+
+def test_consecutive_frames_share_one_crop(tmp_path):
+    ds = sequence_dataset(tmp_path / "ds")
+    found = find_frame_pairs(ds)
+    assert [(a.noisy.name, b.noisy.name) for a, b in found] == [
+        ("noisy_spp16.0000.exr", "noisy_spp16.0001.exr"), ("noisy_spp16.0001.exr", "noisy_spp16.0002.exr")]
+    assert find_frame_pairs(dataset_from_example(tmp_path / "centre_only")) == []
+    (f0, r0, c0), (f1, r1, c1) = sample_consecutive(found[0], np.random.default_rng(3), 24, 3)
+    assert (len(f0), c0, len(f1), c1) == (2, 0, 3, 1)  # frame 0 sits at the sequence's start
+    for frames, ref, c in ((f0, r0, c0), (f1, r1, c1)):
+        assert all((f.width, f.height) == (24, 24) for f in frames)
+        np.testing.assert_array_equal(frames[c].offsets, ref.offsets)
+
+
+def test_temporal_loss_counts_flicker_not_static_error():
+    offsets = torch.tensor([0, 1, 2])  # two pixels, one bin each
+    ref = {"diffuse": torch.tensor([[0.2, 0.3, 0.4], [1.0, 0.5, 0.1]]), "specular": torch.zeros(2, 3),
+           "alpha": torch.ones(2, 1)}
+    scaled = {**ref, "diffuse": ref["diffuse"] * 1.2}
+    assert temporal_loss([scaled, scaled], [ref, ref], [offsets, offsets]).item() == 0
+    assert temporal_loss([ref, scaled], [ref, ref], [offsets, offsets]).item() > 0.01
+
+
+def test_train_with_the_temporal_loss(tmp_path):
+    ds = sequence_dataset(tmp_path / "ds")
+    run = tmp_path / "run"
+    args = ["train", str(ds), "-o", str(run), "--config", "cpu-small-xf", "--steps", "2", "--crop", "16",
+            "--temporal-weight", "2"]
+    r = CliRunner().invoke(cli, args)
+    assert r.exit_code == 0, r.output
+    assert "temporal" in r.output and torch.load(run / "checkpoint.pt", weights_only=False)["step"] == 2
+    r = CliRunner().invoke(cli, ["train", str(dataset_from_example(tmp_path / "c")), "-o", str(tmp_path / "r2"),
+                                 "--config", "cpu-small-xf", "--temporal-weight", "2"])
+    assert r.exit_code == 2 and "--ref-frames all" in r.output
+    r = CliRunner().invoke(cli, ["train", str(ds), "-o", str(tmp_path / "r3"), "--temporal-weight", "2"])
+    assert r.exit_code == 2 and "cross-frame config" in r.output

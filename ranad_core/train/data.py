@@ -1,5 +1,6 @@
 """Training pairs from a `ranad synth` dataset: the centre frame's noisy image and its reference (identical bin
-layouts), random crops and the eight flips/transposes applied identically to both."""
+layouts), random crops and the eight flips/transposes applied identically to both; for the temporal loss,
+consecutive frames that both have references (datasets made with `--ref-frames all`)."""
 
 from __future__ import annotations
 
@@ -42,6 +43,34 @@ def find_pairs(root: str | Path) -> list:
     if not pairs:
         raise RanadError("no complete scenes (scene_*/manifest.json with noisy and reference files)", root)
     return pairs
+
+
+def frame_pair(pair: Pair, offset: int) -> Pair:
+    """The pair of the frame `offset` frames after `pair`'s (same scene, kind and spp; the files may not exist)."""
+    def moved(path: Path) -> Path:
+        stem, frame, ext = path.name.rsplit(".", 2)
+        return path.parent / f"{stem}.{int(frame) + offset:0{len(frame)}d}.{ext}"
+    return Pair(moved(pair.noisy), moved(pair.reference), pair.scene, pair.kind, pair.spp)
+
+
+def find_frame_pairs(root: str | Path) -> list:
+    """(pair of frame t, pair of frame t + 1) for every two consecutive frames with references: the inputs of
+    the temporal loss. Empty for datasets with the centre frame's reference only."""
+    out = []
+    for manifest in sorted(Path(root).glob("scene_*/manifest.json")):
+        m = json.loads(manifest.read_text())
+        refs = set(m.get("reference_frames", [m["centre_frame"]]))
+        for kind in ("deepz", "deepoid"):
+            for spp in m["spp"]:
+                for t in sorted(refs):
+                    if t + 1 not in refs:
+                        continue
+                    a = Pair(manifest.parent / kind / f"noisy_spp{spp}.{t:04d}.exr",
+                             manifest.parent / kind / f"reference_spp{spp}.{t:04d}.exr", manifest.parent.name, kind, spp)
+                    b = frame_pair(a, 1)
+                    if all(p.is_file() for p in (a.noisy, a.reference, b.noisy, b.reference)):
+                        out.append((a, b))
+    return out
 
 
 @lru_cache(maxsize=64)
@@ -175,6 +204,23 @@ def sample_window(pair: Pair, rng: np.random.Generator, crop: int, window: int) 
     win = random_window(ref, rng, crop)
     fx, fy, tr = (bool(b) for b in rng.integers(0, 2, 3))
     return ([transform(f.crop(win), fx, fy, tr) for f in frames], transform(ref.crop(win), fx, fy, tr), centre)
+
+
+def sample_consecutive(pairs: tuple, rng: np.random.Generator, crop: int, window: int) -> list:
+    """For two consecutive frames (find_frame_pairs): each frame's window (every frame up to `window` around it that
+    exists, as `ranad denoise` uses them), its reference and its centre index, with one crop and one
+    flip/transpose for both, so their flattened results can be compared pixel for pixel."""
+    half = (window - 1) // 2
+    out = []
+    for pair in pairs:
+        have = [o for o in range(-half, half + 1) if window_frames(pair, [o])]
+        frames, centre, perm = compensated(pair, min(have), max(have))
+        ref = load(pair.reference)
+        out.append((frames, gather_bins(ref, perm, ref.offsets), centre))
+    win = random_window(out[0][1], rng, crop)
+    fx, fy, tr = (bool(b) for b in rng.integers(0, 2, 3))
+    return [([transform(f.crop(win), fx, fy, tr) for f in frames], transform(ref.crop(win), fx, fy, tr), centre)
+            for frames, ref, centre in out]
 
 
 def reduce_window(frames: list, ref: DeepImage, rng: np.random.Generator, p_no_aux: float,

@@ -1,6 +1,8 @@
 """Losses (paper Sec. 5): SMAPE on the bins of each radiance layer; on the composited (flattened) colour, SMAPE
 plus an SSIM term on the tone-mapped image (structure the per-pixel terms miss: blotches, lost edges); L1 on
-alpha and relative L1 on depth."""
+alpha and relative L1 on depth. For cross-frame training on consecutive frames, a temporal term: L1 between the
+change of the tone-mapped composite from one frame to the next and the reference's change (the flicker that
+`ranad eval --temporal` measures)."""
 
 from __future__ import annotations
 
@@ -35,3 +37,12 @@ def total_loss(pred: dict, ref: dict, offsets: torch.Tensor, size: tuple[int, in
         parts["composite_ssim"] = 1 - ssim(img(cp), img(cr))
     loss = sum(WEIGHTS[k] * v for k, v in parts.items())
     return loss, {k: v.item() for k, v in parts.items()}
+
+
+def temporal_loss(preds: list, refs: list, offsets: list) -> torch.Tensor:
+    """|(T(o[1]) - T(o[0])) - (T(r[1]) - T(r[0]))| averaged over pixels, T the tone map, o and r the composites of
+    two consecutive frames' outputs and references (same crop): penalises flicker the reference does not have,
+    not a static error."""
+    out = [tonemap(composite(p, o)) for p, o in zip(preds, offsets)]
+    ref = [tonemap(composite(r, o)) for r, o in zip(refs, offsets)]
+    return ((out[1] - out[0]) - (ref[1] - ref[0])).abs().mean()

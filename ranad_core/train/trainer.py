@@ -19,8 +19,9 @@ import torch
 from ..errors import RanadError
 from ..fileutil import atomic_output
 from ..model import RaNAD, feature_dim, get_config, prepare
-from .data import find_pairs, reduce_inputs, reduce_window, sample, sample_window
-from .losses import total_loss
+from .data import (find_frame_pairs, find_pairs, reduce_inputs, reduce_window, sample, sample_consecutive,
+                   sample_window)
+from .losses import temporal_loss, total_loss
 
 CHECKPOINT = "checkpoint.pt"
 
@@ -44,6 +45,7 @@ class TrainConfig:
     p_no_split: float = 0.2       # share of crops shown without the diffuse/specular split (reduced mode)
     window: int = 3               # cross-frame configs: frames per training window (centre +- (window-1)/2)
     init: str | None = None       # cross-frame configs: single-frame weights to start from (model name/file/run)
+    temporal_weight: float = 0.0  # cross-frame configs: weight of the temporal loss; > 0 trains on consecutive frames
 
 
 def learning_rate(cfg: TrainConfig, step: int) -> float:
@@ -117,6 +119,61 @@ def build_model(cfg: TrainConfig, config):
     return CrossFrameRaNAD(config, feature_dim())
 
 
+def pair_loss(net, pair, rng: np.random.Generator, cfg: TrainConfig, cross: bool):
+    """(loss, parts) of one training crop of `pair` (its frame's window for cross-frame models); None for a crop
+    without bins."""
+    if cross:
+        frames, ref_img, centre = sample_window(pair, rng, cfg.crop, cfg.window)
+        frames, ref_img = reduce_window(frames, ref_img, rng, cfg.p_no_aux, cfg.p_no_split)
+        window = [prepare(f) for f in frames]
+        noisy, ref = window[centre], prepare(ref_img)
+    else:
+        noisy_img, ref_img = reduce_inputs(*sample(pair, rng, cfg.crop), rng, cfg.p_no_aux, cfg.p_no_split)
+        noisy, ref = prepare(noisy_img), prepare(ref_img)
+    if noisy.layout.bins == 0:
+        return None
+    pred = net(window, centre) if cross else net(noisy)
+    return total_loss(pred, ref.layers, noisy.layout.offsets, noisy.layout.size)
+
+
+def consecutive_loss(net, pairs: tuple, rng: np.random.Generator, cfg: TrainConfig):
+    """(loss, parts) of one crop of two consecutive frames (find_frame_pairs), each denoised with its own window:
+    the mean of their losses plus temporal_weight x the temporal loss; None when a crop has no bins."""
+    no_aux, no_split = rng.random() < cfg.p_no_aux, rng.random() < cfg.p_no_split  # the same for both frames
+    inputs = []
+    for frames, ref_img, centre in sample_consecutive(pairs, rng, cfg.crop, cfg.window):
+        frames, ref_img = reduce_window(frames, ref_img, rng, float(no_aux), float(no_split))
+        window = [prepare(f) for f in frames]
+        if window[centre].layout.bins == 0:
+            return None
+        inputs.append((window, centre, prepare(ref_img)))
+    preds, losses, parts = [], [], {}
+    for window, centre, ref in inputs:
+        preds.append(net(window, centre))
+        loss, p = total_loss(preds[-1], ref.layers, window[centre].layout.offsets, window[centre].layout.size)
+        losses.append(loss)
+        for k, v in p.items():
+            parts[k] = parts.get(k, 0.0) + v / len(inputs)
+    t = temporal_loss(preds, [ref.layers for _, _, ref in inputs], [w[c].layout.offsets for w, c, _ in inputs])
+    parts["temporal"] = t.item()
+    return sum(losses) / len(losses) + cfg.temporal_weight * t, parts
+
+
+def consecutive_pairs(cfg: TrainConfig, cross: bool, world: int) -> list:
+    """The consecutive frames the temporal loss trains on (empty without it), or a RanadError saying why not."""
+    if cfg.temporal_weight <= 0:
+        return []
+    if not cross:
+        raise RanadError("the temporal loss needs a cross-frame config (e.g. cpu-small-xf)", cfg.config)
+    if world > 1:  # two forward passes per step through one DDP module are not supported
+        raise RanadError("the temporal loss trains in one process (--processes 1)", cfg.run)
+    found = find_frame_pairs(cfg.dataset)
+    if not found:
+        raise RanadError("no consecutive frames with references for the temporal loss (make the dataset with "
+                         "`ranad synth --ref-frames all`)", cfg.dataset)
+    return found
+
+
 def train(cfg: TrainConfig, progress=None) -> dict:
     """Trains (or resumes) into cfg.run; returns the last step's loss parts. Joins the process group when
     torch.distributed is initialised (see `spawn_local`, or torchrun's environment)."""
@@ -125,10 +182,11 @@ def train(cfg: TrainConfig, progress=None) -> dict:
         dist.init_process_group("gloo")
     rank, world = (dist.get_rank(), dist.get_world_size()) if dist.is_initialized() else (0, 1)
     pairs = find_pairs(cfg.dataset)
-    os.makedirs(cfg.run, exist_ok=True)
-    torch.manual_seed(cfg.seed)
     config = get_config(cfg.config)
     cross = config.window > 1
+    consecutive = consecutive_pairs(cfg, cross, world)
+    os.makedirs(cfg.run, exist_ok=True)
+    torch.manual_seed(cfg.seed)
     model = build_model(cfg, config)
     opt = torch.optim.AdamW(param_groups(model), lr=cfg.lr, weight_decay=cfg.weight_decay)
     rng = np.random.default_rng(cfg.seed if world == 1 else [cfg.seed, rank])
@@ -150,21 +208,15 @@ def train(cfg: TrainConfig, progress=None) -> dict:
     parts = {}
     t0 = time.perf_counter()
     while step < cfg.steps:
-        pair = pairs[int(rng.integers(0, len(pairs)))]
-        if cross:
-            frames, ref_img, centre = sample_window(pair, rng, cfg.crop, cfg.window)
-            frames, ref_img = reduce_window(frames, ref_img, rng, cfg.p_no_aux, cfg.p_no_split)
-            window = [prepare(f) for f in frames]
-            noisy, ref = window[centre], prepare(ref_img)
-        else:
-            noisy_img, ref_img = reduce_inputs(*sample(pair, rng, cfg.crop), rng, cfg.p_no_aux, cfg.p_no_split)
-            noisy, ref = prepare(noisy_img), prepare(ref_img)
-        if noisy.layout.bins == 0:
-            continue
         for g in opt.param_groups:
             g["lr"] = learning_rate(cfg, step) * g["lr_scale"]
-        pred = net(window, centre) if cross else net(noisy)
-        loss, parts = total_loss(pred, ref.layers, noisy.layout.offsets, noisy.layout.size)
+        if consecutive:
+            result = consecutive_loss(net, consecutive[int(rng.integers(0, len(consecutive)))], rng, cfg)
+        else:
+            result = pair_loss(net, pairs[int(rng.integers(0, len(pairs)))], rng, cfg, cross)
+        if result is None:
+            continue
+        loss, parts = result
         opt.zero_grad()
         loss.backward()
         torch.nn.utils.clip_grad_norm_(model.parameters(), cfg.clip)
