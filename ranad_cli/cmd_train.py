@@ -31,8 +31,11 @@ from tqdm import tqdm
               help="Cross-frame configs: weight of a temporal loss on two consecutive frames per step (each denoised "
                    "with its own window): the change of the flattened result from one frame to the next against the "
                    "reference's. Needs references on every frame (`ranad synth --ref-frames all`).")
+@click.option("--until", default=None, type=click.IntRange(1),
+              help="Stop at this step (checkpointed) although the learning-rate schedule runs to --steps: training "
+                   "in chunks, each resumed with the same options and a later --until.")
 def train_cmd(dataset, run, config, steps, crop, lr, seed, checkpoint_every, processes, p_no_aux, p_no_split, window,
-              init, temporal_weight):
+              init, temporal_weight, until):
     """Train on DATASET (the output of `ranad synth`): centre-frame pairs, random crops, flips and transposes,
     SMAPE on the diffuse and specular bins and on the composited colour plus SSIM on it, L1 on alpha and depth.
     Resumes from RUN/checkpoint.pt when it exists."""
@@ -45,15 +48,16 @@ def train_cmd(dataset, run, config, steps, crop, lr, seed, checkpoint_every, pro
         raise click.BadParameter(str(e), param_hint="--config") from None
     cfg = TrainConfig(dataset=dataset, run=run, config=config, steps=steps, crop=crop, lr=lr, seed=seed,
                       checkpoint_every=checkpoint_every, p_no_aux=p_no_aux, p_no_split=p_no_split,
-                      window=window, init=init, temporal_weight=temporal_weight)
+                      window=window, init=init, temporal_weight=temporal_weight, until=until)
     if processes > 1:
         spawn_local(cfg, processes)
         click.echo(f"done: {steps} steps x {processes} processes, log in {run}/train.log")
         return
-    start = resume_step(run)
-    if start >= steps:
-        click.echo(f"{run} is already at step {start} (--steps {steps}): nothing to do")
+    start, last = resume_step(run), min(steps, until or steps)
+    if start >= last:
+        click.echo(f"{run} is already at step {start} (--steps {steps}" + (f", --until {until}" if until else "")
+                   + "): nothing to do")
         return
-    with tqdm(total=steps, initial=start, desc="train", unit="step") as bar:
+    with tqdm(total=last, initial=start, desc="train", unit="step") as bar:
         parts = train(cfg, bar.update)
     click.echo("done: " + " ".join(f"{k} {v:.4f}" for k, v in parts.items()))

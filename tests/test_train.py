@@ -70,6 +70,22 @@ def test_train_checkpoints_and_resumes(tmp_path):
     assert r.exit_code == 0 and "already at step 6" in r.output
 
 
+def test_train_in_chunks_keeps_the_schedule(tmp_path):
+    """--until stops at a step of a longer schedule; resuming to the end gives the run trained in one go."""
+    ds = dataset_from_example(tmp_path / "ds")
+    base = ["train", str(ds), "--steps", "4", "--crop", "16", "--checkpoint-every", "100"]
+    for run, chunks in (("whole", [None]), ("chunks", [2, None])):
+        for until in chunks:
+            r = CliRunner().invoke(cli, base + ["-o", str(tmp_path / run)] + (["--until", str(until)] if until else []))
+            assert r.exit_code == 0, r.output
+            if until:
+                assert torch.load(tmp_path / run / "checkpoint.pt", weights_only=False)["step"] == until
+    whole, chunks = (torch.load(tmp_path / r / "checkpoint.pt", weights_only=False) for r in ("whole", "chunks"))
+    assert whole["step"] == chunks["step"] == 4
+    for k, v in whole["model"].items():
+        torch.testing.assert_close(chunks["model"][k], v)
+
+
 def test_optimizer_state_follows_parameters_into_new_groups():
     """A checkpoint's optimizer state from before the learning-rate groups (one group, parameter order) lands on
     the same parameters in the grouped optimizer; the temporal gate's group runs at 10x the rate."""

@@ -46,6 +46,7 @@ class TrainConfig:
     window: int = 3               # cross-frame configs: frames per training window (centre +- (window-1)/2)
     init: str | None = None       # cross-frame configs: single-frame weights to start from (model name/file/run)
     temporal_weight: float = 0.0  # cross-frame configs: weight of the temporal loss; > 0 trains on consecutive frames
+    until: int | None = None      # stop (with a checkpoint) at this step; the schedule still runs to `steps`
 
 
 def learning_rate(cfg: TrainConfig, step: int) -> float:
@@ -207,7 +208,8 @@ def train(cfg: TrainConfig, progress=None) -> dict:
     log = open(os.path.join(cfg.run, "train.log"), "a") if rank == 0 else None
     parts = {}
     t0 = time.perf_counter()
-    while step < cfg.steps:
+    last = min(cfg.steps, cfg.until or cfg.steps)
+    while step < last:
         for g in opt.param_groups:
             g["lr"] = learning_rate(cfg, step) * g["lr_scale"]
         if consecutive:
@@ -222,13 +224,13 @@ def train(cfg: TrainConfig, progress=None) -> dict:
         torch.nn.utils.clip_grad_norm_(model.parameters(), cfg.clip)
         opt.step()
         step += 1
-        if log and (step % cfg.log_every == 0 or step == cfg.steps):
+        if log and (step % cfg.log_every == 0 or step == last):
             secs = (time.perf_counter() - t0) / cfg.log_every
             t0 = time.perf_counter()
             line = (f"step {step} loss {loss.item():.4f} " + " ".join(f"{k} {v:.4f}" for k, v in parts.items())
                     + f" lr {learning_rate(cfg, step - 1):.2e} {secs:.2f} s/step")
             print(line, file=log, flush=True)
-        if rank == 0 and (step % cfg.checkpoint_every == 0 or step == cfg.steps):
+        if rank == 0 and (step % cfg.checkpoint_every == 0 or step == last):
             save_checkpoint(ckpt, model, opt, step, cfg, rng)
         if progress:
             progress(1)
