@@ -25,6 +25,16 @@ class Pair:
     spp: int
 
 
+def pair_at(scene: Path, kind: str, spp: int, frame: int) -> Pair:
+    """The (noisy, reference) files of one frame of a scene (they may not exist)."""
+    return Pair(scene / kind / f"noisy_spp{spp}.{frame:04d}.exr", scene / kind / f"reference_spp{spp}.{frame:04d}.exr",
+                scene.name, kind, spp)
+
+
+def complete(*pairs: Pair) -> bool:
+    return all(p.noisy.is_file() and p.reference.is_file() for p in pairs)
+
+
 def find_pairs(root: str | Path) -> list:
     """Every (noisy, reference) pair of the centre frames of a dataset's complete scenes."""
     root = Path(root)
@@ -33,24 +43,14 @@ def find_pairs(root: str | Path) -> list:
     pairs = []
     for manifest in sorted(root.glob("scene_*/manifest.json")):
         m = json.loads(manifest.read_text())
-        c = m["centre_frame"]
         for kind in ("deepz", "deepoid"):
             for spp in m["spp"]:
-                noisy = manifest.parent / kind / f"noisy_spp{spp}.{c:04d}.exr"
-                ref = manifest.parent / kind / f"reference_spp{spp}.{c:04d}.exr"
-                if noisy.is_file() and ref.is_file():
-                    pairs.append(Pair(noisy, ref, manifest.parent.name, kind, spp))
+                pair = pair_at(manifest.parent, kind, spp, m["centre_frame"])
+                if complete(pair):
+                    pairs.append(pair)
     if not pairs:
         raise RanadError("no complete scenes (scene_*/manifest.json with noisy and reference files)", root)
     return pairs
-
-
-def frame_pair(pair: Pair, offset: int) -> Pair:
-    """The pair of the frame `offset` frames after `pair`'s (same scene, kind and spp; the files may not exist)."""
-    def moved(path: Path) -> Path:
-        stem, frame, ext = path.name.rsplit(".", 2)
-        return path.parent / f"{stem}.{int(frame) + offset:0{len(frame)}d}.{ext}"
-    return Pair(moved(pair.noisy), moved(pair.reference), pair.scene, pair.kind, pair.spp)
 
 
 def find_frame_pairs(root: str | Path) -> list:
@@ -63,13 +63,9 @@ def find_frame_pairs(root: str | Path) -> list:
         for kind in ("deepz", "deepoid"):
             for spp in m["spp"]:
                 for t in sorted(refs):
-                    if t + 1 not in refs:
-                        continue
-                    a = Pair(manifest.parent / kind / f"noisy_spp{spp}.{t:04d}.exr",
-                             manifest.parent / kind / f"reference_spp{spp}.{t:04d}.exr", manifest.parent.name, kind, spp)
-                    b = frame_pair(a, 1)
-                    if all(p.is_file() for p in (a.noisy, a.reference, b.noisy, b.reference)):
-                        out.append((a, b))
+                    two = (pair_at(manifest.parent, kind, spp, t), pair_at(manifest.parent, kind, spp, t + 1))
+                    if t + 1 in refs and complete(*two):
+                        out.append(two)
     return out
 
 
@@ -190,37 +186,43 @@ def compensated(pair: Pair, lo: int, hi: int) -> tuple:
     return tuple(f for f, _ in done), centre, done[centre][1]
 
 
+def available_window(pair: Pair, window: int) -> tuple:
+    """(lo, hi): the offsets of the first and last frames up to `window` around the pair's frame that exist."""
+    half = (window - 1) // 2
+    have = [o for o in range(-half, half + 1) if window_frames(pair, [o])]
+    return min(have), max(have)
+
+
+def window_with_reference(pair: Pair, lo: int, hi: int) -> tuple:
+    """(the compensated frames centre+lo .. centre+hi, the reference in the centre frame's sorted order, the
+    centre's index)."""
+    frames, centre, perm = compensated(pair, lo, hi)
+    ref = load(pair.reference)
+    return frames, gather_bins(ref, perm, ref.offsets), centre
+
+
+def cropped(windows: list, rng: np.random.Generator, crop: int) -> list:
+    """The windows (frames, reference, centre) cut to one random crop with one random flip/transpose."""
+    win = random_window(windows[0][1], rng, crop)
+    fx, fy, tr = (bool(b) for b in rng.integers(0, 2, 3))
+    return [([transform(f.crop(win), fx, fy, tr) for f in frames], transform(ref.crop(win), fx, fy, tr), centre)
+            for frames, ref, centre in windows]
+
+
 def sample_window(pair: Pair, rng: np.random.Generator, crop: int, window: int) -> tuple:
     """(noisy crops of a window of frames, the reference crop, the centre's index): windows up to `window`
     frames around the centre, shortened at random as at a sequence's ends, the same crop and flip for all."""
-    half = (window - 1) // 2
-    have = [o for o in range(-half, half + 1) if window_frames(pair, [o])]
-    lo_all, hi_all = min(have), max(have)
+    lo_all, hi_all = available_window(pair, window)
     r = rng.random()
     lo, hi = (lo_all, hi_all) if r < 0.6 else ((lo_all, 0) if r < 0.75 else ((0, hi_all) if r < 0.9 else (0, 0)))
-    frames, centre, perm = compensated(pair, lo, hi)
-    ref = load(pair.reference)
-    ref = gather_bins(ref, perm, ref.offsets)            # in the centre frame's sorted order
-    win = random_window(ref, rng, crop)
-    fx, fy, tr = (bool(b) for b in rng.integers(0, 2, 3))
-    return ([transform(f.crop(win), fx, fy, tr) for f in frames], transform(ref.crop(win), fx, fy, tr), centre)
+    return cropped([window_with_reference(pair, lo, hi)], rng, crop)[0]
 
 
 def sample_consecutive(pairs: tuple, rng: np.random.Generator, crop: int, window: int) -> list:
     """For two consecutive frames (find_frame_pairs): each frame's window (every frame up to `window` around it that
     exists, as `ranad denoise` uses them), its reference and its centre index, with one crop and one
     flip/transpose for both, so their flattened results can be compared pixel for pixel."""
-    half = (window - 1) // 2
-    out = []
-    for pair in pairs:
-        have = [o for o in range(-half, half + 1) if window_frames(pair, [o])]
-        frames, centre, perm = compensated(pair, min(have), max(have))
-        ref = load(pair.reference)
-        out.append((frames, gather_bins(ref, perm, ref.offsets), centre))
-    win = random_window(out[0][1], rng, crop)
-    fx, fy, tr = (bool(b) for b in rng.integers(0, 2, 3))
-    return [([transform(f.crop(win), fx, fy, tr) for f in frames], transform(ref.crop(win), fx, fy, tr), centre)
-            for frames, ref, centre in out]
+    return cropped([window_with_reference(p, *available_window(p, window)) for p in pairs], rng, crop)
 
 
 def reduce_window(frames: list, ref: DeepImage, rng: np.random.Generator, p_no_aux: float,
