@@ -16,7 +16,7 @@ template <typename T>
 struct VecFor;
 template <>
 struct VecFor<float> {
-  using V = rana::f32x16;
+  using V = rana::f32v;
 };
 template <>
 struct VecFor<double> {
@@ -109,7 +109,7 @@ template <typename T, typename F>
 void with_kernel(const Plan& pl, F&& f) {
   if (pl.scalar) return f.template operator()<T, 1>();
   if constexpr (std::is_same_v<T, float>) {
-    if (pl.HB == 4) return f.template operator()<rana::f32x16, 4>();
+    if (pl.HB == 4) return f.template operator()<rana::f32v, 4>();
   }
   return f.template operator()<typename VecFor<T>::V, 1>();
 }

@@ -2,5 +2,5 @@
 #include "rana_cpu_kernels.h"
 
 namespace rana_cpu {
-RANA_CPU_KERNELS(, float, rana::f32x16, 4)
+RANA_CPU_KERNELS(, float, rana::f32v, 4)
 }  // namespace rana_cpu

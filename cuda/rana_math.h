@@ -10,7 +10,7 @@
 //
 // Lanes. The bodies work on a BLOCK of L entries (queries, or keys in the dK/dV pass) that lie on at most
 // kMaxSpan + 1 consecutive pixels of one grid row, one entry per SIMD lane: V is a vector of L scalars (a GCC
-// vector of 64 bytes on the CPU; the scalar itself, L = 1, on the GPU where each thread is one lane). The
+// vector of the machine's register width on the CPU, see f32v; the scalar itself, L = 1, on the GPU where each thread is one lane). The
 // block's operand rows sit in registers (q[c] for c < d is d vectors), every key of the union of the lanes'
 // discs is visited once and serves all lanes with d broadcast-FMAs, and each lane masks the keys outside its
 // own disc. The mask and the relative-position bias are one table lookup per (lane, key pixel): a table per
@@ -37,7 +37,7 @@
 #define RANA_NOINLINE __attribute__((noinline))
 #define RANA_HD inline __attribute__((always_inline))
 #define RANA_UNROLL _Pragma("GCC unroll 64")
-#if defined(__AVX512F__)
+#if defined(__AVX512F__) || defined(__AVX2__)
 #include <immintrin.h>
 #endif
 #endif
@@ -51,8 +51,18 @@ constexpr int kMaxSpan = 7;   // a block's entries lie on at most kMaxSpan + 1 c
 // ---- lane vectors ------------------------------------------------------------------------------------
 #if !defined(__CUDACC__)
 typedef float f32x16 __attribute__((vector_size(64)));
+typedef float f32x8 __attribute__((vector_size(32)));
 typedef double f64x8 __attribute__((vector_size(64)));
 typedef int32_t i32x16 __attribute__((vector_size(64)));
+typedef int32_t i32x8 __attribute__((vector_size(32)));
+// The float lane vector of the CPU kernels: the machine's register width. 16 lanes (one zmm) with AVX-512, else 8
+// (one ymm): GCC splits a 64-byte vector into pairs of 32-byte ones badly (lane shuffles through the stack for
+// selects, conversions and gathers), which made the kernels 10x slower on an AVX2-only CPU.
+#if defined(__AVX512F__)
+typedef f32x16 f32v;
+#else
+typedef f32x8 f32v;
+#endif
 #endif
 
 template <typename V>
@@ -65,6 +75,11 @@ template <>
 struct Lanes<f32x16> {
   using T = float;
   static constexpr int L = 16;
+};
+template <>
+struct Lanes<f32x8> {
+  using T = float;
+  static constexpr int L = 8;
 };
 template <>
 struct Lanes<f64x8> {
@@ -134,6 +149,30 @@ RANA_HD float fast_exp2(float x) {
 }
 RANA_HD double fast_exp2(double x) { return std::exp2(x); }
 #if !defined(__CUDACC__)
+// The same steps on every lane of a float vector F (I: the int32 vector of as many lanes).
+template <typename F, typename I>
+inline F fast_exp2_lanes(F x) {
+  const I under = x < -125.0f;
+  x = under ? splat<F>(-125.0f) : x;
+#if defined(__AVX2__) && !defined(__AVX512F__)
+  if constexpr (sizeof(F) == 32) {  // round to nearest in one instruction
+    const __m256 n8 = _mm256_round_ps(reinterpret_cast<const __m256&>(x), _MM_FROUND_TO_NEAREST_INT | _MM_FROUND_NO_EXC);
+    const F n = reinterpret_cast<const F&>(n8), f = x - n;
+    const F p = RANA_EXP2_POLY(f);
+    const I bits = (__builtin_convertvector(n, I) + 127) << 23;
+    const F e = p * reinterpret_cast<const F&>(bits);
+    return under ? splat<F>(0.0f) : e;
+  }
+#endif
+  const F y = x + 0.5f;
+  F n = __builtin_convertvector(__builtin_convertvector(y, I), F);  // truncation, then floor
+  n = n > y ? n - 1.0f : n;
+  const F f = x - n;
+  const F p = RANA_EXP2_POLY(f);
+  const I bits = (__builtin_convertvector(n, I) + 127) << 23;
+  const F e = p * reinterpret_cast<const F&>(bits);
+  return under ? splat<F>(0.0f) : e;
+}
 inline f32x16 fast_exp2(f32x16 x) {  // the same steps on 16 lanes
 #if defined(__AVX512F__) && defined(__AVX512DQ__)
   // AVX-512: vreduceps gives f = x - round(x) in one instruction, vscalefps the 2^n. The mask zeroes inputs below
@@ -147,18 +186,10 @@ inline f32x16 fast_exp2(f32x16 x) {  // the same steps on 16 lanes
   const __m512 e = _mm512_maskz_scalef_ps(keep, reinterpret_cast<const __m512&>(p), n);
   return reinterpret_cast<const f32x16&>(e);
 #else
-  const i32x16 under = x < -125.0f;
-  x = under ? splat<f32x16>(-125.0f) : x;
-  const f32x16 y = x + 0.5f;
-  f32x16 n = __builtin_convertvector(__builtin_convertvector(y, i32x16), f32x16);  // truncation, then floor
-  n = n > y ? n - 1.0f : n;
-  const f32x16 f = x - n;
-  const f32x16 p = RANA_EXP2_POLY(f);
-  const i32x16 bits = (__builtin_convertvector(n, i32x16) + 127) << 23;
-  const f32x16 e = p * reinterpret_cast<const f32x16&>(bits);
-  return under ? splat<f32x16>(0.0f) : e;
+  return fast_exp2_lanes<f32x16, i32x16>(x);
 #endif
 }
+inline f32x8 fast_exp2(f32x8 x) { return fast_exp2_lanes<f32x8, i32x8>(x); }
 inline f64x8 fast_exp2(f64x8 x) {
   for (int i = 0; i < 8; ++i) x[i] = std::exp2(x[i]);
   return x;
@@ -315,6 +346,17 @@ RANA_HD V lane_bias(const typename Lanes<V>::T* tab, const LaneTable<Lanes<V>::L
                            _mm512_and_si512(_mm512_set1_epi32(row_offset), _mm512_loadu_si512(lt.used))),
           _mm512_set1_epi32(x));
       const __m512 g = _mm512_i32gather_ps(idx, tab, 4);
+      return reinterpret_cast<const V&>(g);
+    }
+#endif
+#if defined(__AVX2__) && !defined(__CUDACC__)
+    if constexpr (L == 8 && sizeof(typename Lanes<V>::T) == 4) {
+      const __m256i idx = _mm256_add_epi32(
+          _mm256_add_epi32(_mm256_loadu_si256(reinterpret_cast<const __m256i*>(lt.base)),
+                           _mm256_and_si256(_mm256_set1_epi32(row_offset),
+                                            _mm256_loadu_si256(reinterpret_cast<const __m256i*>(lt.used)))),
+          _mm256_set1_epi32(x));
+      const __m256 g = _mm256_i32gather_ps(tab, idx, 4);
       return reinterpret_cast<const V&>(g);
     }
 #endif
@@ -482,6 +524,12 @@ RANA_HD V load_chunk(const typename Lanes<V>::T* p) {
 #if defined(__AVX512F__) && !defined(__CUDACC__)
     if constexpr (L == 16 && HB == 4 && sizeof(T) == 4) {
       const __m512 c = _mm512_broadcast_f32x4(_mm_loadu_ps(p));
+      return reinterpret_cast<const V&>(c);
+    }
+#endif
+#if defined(__AVX2__) && !defined(__CUDACC__)
+    if constexpr (L == 8 && HB == 4 && sizeof(T) == 4) {  // one vbroadcastf128 from memory
+      const __m256 c = _mm256_broadcast_ps(reinterpret_cast<const __m128*>(p));
       return reinterpret_cast<const V&>(c);
     }
 #endif
