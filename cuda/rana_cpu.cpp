@@ -20,7 +20,7 @@ struct VecFor<float> {
 };
 template <>
 struct VecFor<double> {
-  using V = rana::f64x8;
+  using V = rana::f64v;
 };
 
 int threads() { return at::get_num_threads(); }

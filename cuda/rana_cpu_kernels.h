@@ -4,7 +4,7 @@
 // rana_cpu_other.cpp) compile without torch's headers and in parallel; rana_cpu.cpp binds them to torch.
 //
 // Work is organised in blocks (rana_math.h): entries of one grid row on at most kMaxSpan + 1 consecutive pixels,
-// HB heads of each, one (entry, head) per SIMD lane (L = 16 floats with AVX-512, 8 on other CPUs; 8 doubles).
+// HB heads of each, one (entry, head) per SIMD lane (L = 16 floats and 8 doubles with AVX-512, half as many on other CPUs).
 // Forward: online softmax per query block, saving the log-sum-exp.
 // Backward (FlashAttention-2 style, probabilities recomputed from the log-sum-exp):
 //   pass 1, per query block: dQ;
@@ -216,7 +216,7 @@ void backward_dkdv(const rana::Op<T>& op, const T* qst, const T* dost, const T* 
 #define RANA_CPU_EXTERN extern
 RANA_CPU_KERNELS(RANA_CPU_EXTERN, float, rana::f32v, 4)
 RANA_CPU_KERNELS(RANA_CPU_EXTERN, float, rana::f32v, 1)
-RANA_CPU_KERNELS(RANA_CPU_EXTERN, double, rana::f64x8, 1)
+RANA_CPU_KERNELS(RANA_CPU_EXTERN, double, rana::f64v, 1)
 RANA_CPU_KERNELS(RANA_CPU_EXTERN, float, float, 1)
 RANA_CPU_KERNELS(RANA_CPU_EXTERN, double, double, 1)
 

@@ -3,7 +3,7 @@
 #include "rana_cpu_kernels.h"
 
 namespace rana_cpu {
-RANA_CPU_KERNELS(, double, rana::f64x8, 1)
+RANA_CPU_KERNELS(, double, rana::f64v, 1)
 RANA_CPU_KERNELS(, float, float, 1)
 RANA_CPU_KERNELS(, double, double, 1)
 }  // namespace rana_cpu

@@ -53,6 +53,7 @@ constexpr int kMaxSpan = 7;   // a block's entries lie on at most kMaxSpan + 1 c
 typedef float f32x16 __attribute__((vector_size(64)));
 typedef float f32x8 __attribute__((vector_size(32)));
 typedef double f64x8 __attribute__((vector_size(64)));
+typedef double f64x4 __attribute__((vector_size(32)));
 typedef int32_t i32x16 __attribute__((vector_size(64)));
 typedef int32_t i32x8 __attribute__((vector_size(32)));
 // The float lane vector of the CPU kernels: the machine's register width. 16 lanes (one zmm) with AVX-512, else 8
@@ -60,8 +61,10 @@ typedef int32_t i32x8 __attribute__((vector_size(32)));
 // selects, conversions and gathers), which made the kernels 10x slower on an AVX2-only CPU.
 #if defined(__AVX512F__)
 typedef f32x16 f32v;
+typedef f64x8 f64v;  // double: gradient checks only
 #else
 typedef f32x8 f32v;
+typedef f64x4 f64v;
 #endif
 #endif
 
@@ -85,6 +88,11 @@ template <>
 struct Lanes<f64x8> {
   using T = double;
   static constexpr int L = 8;
+};
+template <>
+struct Lanes<f64x4> {
+  using T = double;
+  static constexpr int L = 4;
 };
 #endif
 
@@ -192,6 +200,10 @@ inline f32x16 fast_exp2(f32x16 x) {  // the same steps on 16 lanes
 inline f32x8 fast_exp2(f32x8 x) { return fast_exp2_lanes<f32x8, i32x8>(x); }
 inline f64x8 fast_exp2(f64x8 x) {
   for (int i = 0; i < 8; ++i) x[i] = std::exp2(x[i]);
+  return x;
+}
+inline f64x4 fast_exp2(f64x4 x) {
+  for (int i = 0; i < 4; ++i) x[i] = std::exp2(x[i]);
   return x;
 }
 #endif
