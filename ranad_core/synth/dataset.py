@@ -53,8 +53,12 @@ def is_done(cfg: SynthConfig, index: int) -> bool:
 
 
 def _worker_init(threads: int) -> None:
-    """Each worker process gets its share of the cores for Dr.Jit (both using all cores oversubscribes them)."""
+    """Each worker process gets its share of the cores for Dr.Jit (both using all cores oversubscribes them), and
+    ends with the parent (a killed `ranad synth` left its workers rendering; see ranad_core/procutil.py)."""
+    from ..procutil import die_with_parent
     from .mitsuba_env import mitsuba
+
+    die_with_parent()
 
     mitsuba()
     import drjit as dr
