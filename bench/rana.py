@@ -54,6 +54,23 @@ def pairs_of(offsets, size, radius) -> int:
     return int((counts * keys).sum())
 
 
+def cpu_summary() -> str:
+    """The CPU model and the SIMD width the kernels were built for (-march=native: 16 float lanes with AVX-512,
+    8 with AVX2), since figures from different machines are not comparable."""
+    model, flags = "unknown CPU", ""
+    try:
+        with open("/proc/cpuinfo") as f:
+            for line in f:
+                if line.startswith("model name") and model == "unknown CPU":
+                    model = line.split(":", 1)[1].strip()
+                elif line.startswith("flags") and not flags:
+                    flags = line
+    except OSError:
+        pass
+    simd = "AVX-512, 16 lanes" if " avx512f" in flags else "AVX2, 8 lanes" if " avx2" in flags else "no AVX2"
+    return f"{model} ({simd})"
+
+
 def best_of(fn, repeats: int) -> float:
     times = []
     for _ in range(repeats):
@@ -105,6 +122,7 @@ def main() -> None:
     layouts = ("channel-major", "natural") if args.layout == "both" else (args.layout,)
     print(f"RaNA bench: radius {args.radius}, {args.heads} heads x {args.dim}, {args.threads} threads, "
           f"best of {args.repeats}, torch {torch.__version__}")
+    print(f"CPU: {cpu_summary()}")
     rows = []
     runs = [("C++ kernels", args.size, "cpu", layout) for layout in layouts]
     runs += [("C++ kernels", args.ref_size, "cpu", "natural"), ("reference", args.ref_size, "reference", "natural")]
