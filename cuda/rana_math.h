@@ -162,19 +162,18 @@ template <typename F, typename I>
 inline F fast_exp2_lanes(F x) {
   const I under = x < -125.0f;
   x = under ? splat<F>(-125.0f) : x;
+  F n;  // round(x)
 #if defined(__AVX2__) && !defined(__AVX512F__)
-  if constexpr (sizeof(F) == 32) {  // round to nearest in one instruction
-    const __m256 n8 = _mm256_round_ps(reinterpret_cast<const __m256&>(x), _MM_FROUND_TO_NEAREST_INT | _MM_FROUND_NO_EXC);
-    const F n = reinterpret_cast<const F&>(n8), f = x - n;
-    const F p = RANA_EXP2_POLY(f);
-    const I bits = (__builtin_convertvector(n, I) + 127) << 23;
-    const F e = p * reinterpret_cast<const F&>(bits);
-    return under ? splat<F>(0.0f) : e;
-  }
+  if constexpr (sizeof(F) == 32) {  // one vroundps
+    const __m256 r = _mm256_round_ps(reinterpret_cast<const __m256&>(x), _MM_FROUND_TO_NEAREST_INT | _MM_FROUND_NO_EXC);
+    n = reinterpret_cast<const F&>(r);
+  } else
 #endif
-  const F y = x + 0.5f;
-  F n = __builtin_convertvector(__builtin_convertvector(y, I), F);  // truncation, then floor
-  n = n > y ? n - 1.0f : n;
+  {
+    const F y = x + 0.5f;
+    n = __builtin_convertvector(__builtin_convertvector(y, I), F);  // truncation, then floor
+    n = n > y ? n - 1.0f : n;
+  }
   const F f = x - n;
   const F p = RANA_EXP2_POLY(f);
   const I bits = (__builtin_convertvector(n, I) + 127) << 23;
