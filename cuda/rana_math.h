@@ -197,12 +197,9 @@ inline f32x16 fast_exp2(f32x16 x) {  // the same steps on 16 lanes
 #endif
 }
 inline f32x8 fast_exp2(f32x8 x) { return fast_exp2_lanes<f32x8, i32x8>(x); }
-inline f64x8 fast_exp2(f64x8 x) {
-  for (int i = 0; i < 8; ++i) x[i] = std::exp2(x[i]);
-  return x;
-}
-inline f64x4 fast_exp2(f64x4 x) {
-  for (int i = 0; i < 4; ++i) x[i] = std::exp2(x[i]);
+template <typename V>  // double lanes (gradient checks only): std::exp2 per lane
+inline std::enable_if_t<std::is_same_v<V, f64x8> || std::is_same_v<V, f64x4>, V> fast_exp2(V x) {
+  for (int i = 0; i < Lanes<V>::L; ++i) x[i] = std::exp2(x[i]);
   return x;
 }
 #endif
