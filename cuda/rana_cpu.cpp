@@ -1,5 +1,5 @@
 // Torch bindings of the CPU RaNA kernels (rana_cpu_kernels.h): checks, padding to the compiled sizes, the
-// channel-major copies of the operands the kernels stream, and the queries' pixel order.
+// head-grouped copies of the operands the kernels stream, and the queries' pixel order.
 #include <torch/extension.h>
 
 #include <vector>
@@ -25,21 +25,23 @@ struct VecFor<double> {
 
 int threads() { return at::get_num_threads(); }
 
-// [N, H, d] -> [N, d, H] storage: channel c of all heads of an entry side by side (one load serves a block's
-// heads). Free for a channel-major view; otherwise one parallel pass over entries (torch's strided copy of the
-// transposed view took ~40 ms per 200 MB operand).
-torch::Tensor channel_major(const torch::Tensor& x) {
-  if (is_channel_major(x)) return x.transpose(1, 2);
-  const auto xc = x.contiguous();
+// [N, H, d] -> head-grouped storage [N, H / G, d, G] (rana::Streamed, G = the kernel's HB): channel c of a group's
+// heads side by side, so one load serves a block's heads. With G = H it is channel-major [N, d, H], free for a
+// channel-major view (as the model's projections write); with G = 1 it is the natural layout. Otherwise one parallel
+// pass over entries (torch's strided copy of the transposed view took ~40 ms per 200 MB operand).
+torch::Tensor head_grouped(const torch::Tensor& x, int64_t G) {
   const int64_t n = x.size(0), H = x.size(1), d = x.size(2);
-  auto out = rana_cpu_buffers::empty({n, d, H}, x.options());
-  AT_DISPATCH_FLOATING_TYPES(x.scalar_type(), "channel_major", [&] {
+  if (G == H && is_channel_major(x)) return x.transpose(1, 2);
+  if (G == 1 || H == 1) return x.contiguous();
+  const auto xc = x.contiguous();
+  auto out = rana_cpu_buffers::empty({n, H / G, d, G}, x.options());
+  AT_DISPATCH_FLOATING_TYPES(x.scalar_type(), "head_grouped", [&] {
     const scalar_t* src = xc.data_ptr<scalar_t>();
     scalar_t* dst = out.data_ptr<scalar_t>();
     at::parallel_for(0, n, 4096, [&](int64_t b, int64_t e) {
       for (int64_t j = b; j < e; ++j)
         for (int64_t h = 0; h < H; ++h)
-          for (int64_t c = 0; c < d; ++c) dst[(j * d + c) * H + h] = src[(j * H + h) * d + c];
+          for (int64_t c = 0; c < d; ++c) dst[((j * (H / G) + h / G) * d + c) * G + h % G] = src[(j * H + h) * d + c];
     });
   });
   return out;
@@ -123,7 +125,7 @@ std::vector<torch::Tensor> rana_forward(torch::Tensor q, torch::Tensor k, torch:
   const Plan pl = plan_for(H, q.size(2), dv, q.scalar_type() == torch::kDouble, scalar_lanes);
   const QueryOrder qo = order_queries(q_pixels, Hk, Wk);
   const auto qp = pad_to(q, pl.H, pl.dk);
-  const auto kt = channel_major(pad_to(k, pl.H, pl.dk)), vt = channel_major(pad_to(v, pl.H, pl.dv));
+  const auto kt = head_grouped(pad_to(k, pl.H, pl.dk), pl.HB), vt = head_grouped(pad_to(v, pl.H, pl.dv), pl.HB);
   auto out = rana_cpu_buffers::empty({nq, pl.H, pl.dv}, q.options());
   auto lse = torch::empty({nq, pl.H}, q.options());
   AT_DISPATCH_FLOATING_TYPES(q.scalar_type(), "rana_forward", [&] {
@@ -165,7 +167,7 @@ std::vector<torch::Tensor> rana_backward(torch::Tensor dout, torch::Tensor q, to
     const auto t = make_op<T>(pl, k_offsets, Hk, Wk, rows_dy, rows_dx0, rows_dx1, R, bias, scale);
     with_kernel<T>(pl, [&]<typename V, int HB>() {
       {  // pass 1: dQ per query block
-        const auto kt = channel_major(kp), vt = channel_major(vp);
+        const auto kt = head_grouped(kp, pl.HB), vt = head_grouped(vp, pl.HB);
         rana_cpu::backward_dq<T, V, HB>(t.op, operand<T>(qp), operand<T>(dop), lse_pos.data_ptr<T>(),
                                         delta_p.data_ptr<T>(), kt.data_ptr<T>(), vt.data_ptr<T>(), qo.index(),
                                         output<T>(dq), threads());
@@ -174,7 +176,7 @@ std::vector<torch::Tensor> rana_backward(torch::Tensor dout, torch::Tensor q, to
       auto sorted = [&](const torch::Tensor& x) -> torch::Tensor {  // keeps a channel-major view's layout
         return qo.identity ? x : x.index_select(0, qo.order);
       };
-      const torch::Tensor qst = channel_major(sorted(qp)), dost = channel_major(sorted(dop)),
+      const torch::Tensor qst = head_grouped(sorted(qp), pl.HB), dost = head_grouped(sorted(dop), pl.HB),
                           lse_s = sorted(lse_pos).contiguous(), delta_s = sorted(delta_p).contiguous();
       rana_cpu::backward_dkdv<T, V, HB>(t.op, qst.data_ptr<T>(), dost.data_ptr<T>(), lse_s.data_ptr<T>(),
                                         delta_s.data_ptr<T>(), operand<T>(kp), operand<T>(vp), qo.ptr.data(),

@@ -134,13 +134,13 @@ void over_query_blocks(const rana::Op<T>& op, const QueryIndex& qi, int threads,
   });
 }
 
-// Forward over every query block: q [Nq, H, dk] (any Operand layout); kt [Nk, dk, H], vt [Nk, dv, H];
+// Forward over every query block: q [Nq, H, dk] (any Operand layout); kt, vt head-grouped by HB (rana::Streamed);
 // out [Nq, H, dv], lse [Nq, H].
 template <typename T, typename V, int HB>
 void forward(const rana::Op<T>& op, const Operand<T>& q, const T* kt, const T* vt, const QueryIndex& qi, T* out,
              T* lse, int threads) {
   over_query_blocks<T, V, HB>(op, qi, threads, [&]<int DK, int DV>(const auto& b, const auto& lt, auto walk, int h0) {
-    rana::forward_block<V, HB, DK, DV, kBuffer>(op, b, lt, walk, h0, q, kt, vt, out, lse);
+    rana::forward_block<V, HB, DK, DV, kBuffer, HB>(op, b, lt, walk, h0, q, kt, vt, out, lse);
   });
 }
 
@@ -150,12 +150,12 @@ template <typename T, typename V, int HB>
 void backward_dq(const rana::Op<T>& op, const Operand<T>& q, const Operand<T>& dout, const T* lse, const T* delta,
                  const T* kt, const T* vt, const QueryIndex& qi, const Output<T>& dq, int threads) {
   over_query_blocks<T, V, HB>(op, qi, threads, [&]<int DK, int DV>(const auto& b, const auto& lt, auto walk, int h0) {
-    rana::backward_dq_block<V, HB, DK, DV, kBuffer>(op, b, lt, walk, h0, q, dout, lse, delta, kt, vt, dq);
+    rana::backward_dq_block<V, HB, DK, DV, kBuffer, HB>(op, b, lt, walk, h0, q, dout, lse, delta, kt, vt, dq);
   });
 }
 
 // dK, dV (and the bias gradient [H, 2R+1, 2R+1] when dbias is not null) over every key block: queries sorted by
-// pixel (q_ptr: their CSR over the grid) with qst [Nq, dk, H], dost [Nq, dv, H], lse_s, delta_s [Nq, H]; keys in
+// pixel (q_ptr: their CSR over the grid) with qst, dost head-grouped by HB, lse_s, delta_s [Nq, H]; keys in
 // their own order, k, v [Nk, H, d] (Operands); writes dk, dv [Nk, H, d] (Outputs).
 template <typename T, typename V, int HB>
 void backward_dkdv(const rana::Op<T>& op, const T* qst, const T* dost, const T* lse_s, const T* delta_s,
@@ -178,7 +178,7 @@ void backward_dkdv(const rana::Op<T>& op, const T* qst, const T* dost, const T* 
         const Block<Q> b = fill_block<Q>(blocks[i], op.g.offsets, op.g.Wk, nullptr);
         const int n = rana::record_runs(rana::PixelWalk{op.g, op.rows, q_ptr, -1, b.y, b.x0, b.span}, runs.data());
         for (int h0 = 0; h0 < H; h0 += HB)
-          rana::backward_dkdv_block<V, HB, DK, DV, kBuffer>(
+          rana::backward_dkdv_block<V, HB, DK, DV, kBuffer, HB>(
               op, b, rana::lane_table<L, HB>(b, op.rows, H, h0, -1), rana::RunWalk{runs.data(), n}, h0, qst, dost,
               lse_s, delta_s, k, v, dk, dv, dbias ? lanes.data() + (h0 / HB) * lane_size : nullptr);
       }

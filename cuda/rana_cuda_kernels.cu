@@ -38,7 +38,7 @@ __global__ void __launch_bounds__(kThreads) forward_kernel(rana::Op<T> op, rana:
   if (e >= nq) return;
   const rana::Block<1> b = one_entry(qpix, e);
   const rana::LaneTable<1> lt = rana::lane_table<1, 1>(b, op.rows, op.H, h, 1);
-  rana::forward_block<T, 1, DK, DV, kBuffer>(op, b, lt, rana::PixelWalk{op.g, op.rows, op.g.offsets, 1, b.y, b.x0, 0},
+  rana::forward_block<T, 1, DK, DV, kBuffer, 0>(op, b, lt, rana::PixelWalk{op.g, op.rows, op.g.offsets, 1, b.y, b.x0, 0},
                                               h, q, kt, vt, out, lse);
 }
 
@@ -51,7 +51,7 @@ __global__ void __launch_bounds__(kThreads) dq_kernel(rana::Op<T> op, rana::Oper
   if (e >= nq) return;
   const rana::Block<1> b = one_entry(qpix, e);
   const rana::LaneTable<1> lt = rana::lane_table<1, 1>(b, op.rows, op.H, h, 1);
-  rana::backward_dq_block<T, 1, DK, DV, kBuffer>(op, b, lt,
+  rana::backward_dq_block<T, 1, DK, DV, kBuffer, 0>(op, b, lt,
                                                   rana::PixelWalk{op.g, op.rows, op.g.offsets, 1, b.y, b.x0, 0}, h,
                                                   q, dout, lse, delta, kt, vt, dq);
 }
@@ -70,7 +70,7 @@ __global__ void __launch_bounds__(kThreads) dkdv_kernel(rana::Op<T> op, const T*
   if (j < nk) {
     const rana::Block<1> b = one_entry(kpix, j);
     const rana::LaneTable<1> lt = rana::lane_table<1, 1>(b, op.rows, op.H, h, -1);
-    rana::backward_dkdv_block<T, 1, DK, DV, kBuffer>(op, b, lt, rana::PixelWalk{op.g, op.rows, q_ptr, -1, b.y, b.x0, 0},
+    rana::backward_dkdv_block<T, 1, DK, DV, kBuffer, 0>(op, b, lt, rana::PixelWalk{op.g, op.rows, q_ptr, -1, b.y, b.x0, 0},
                                                       h, qst, dost, lse_s, delta_s, k, v, dk, dv,
                                                       BIAS ? tab : nullptr);
   }

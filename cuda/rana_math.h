@@ -490,6 +490,20 @@ struct Output {
   int64_t sN, sH, sC;
 };
 
+// The operands the bodies stream per key (kt, vt; qst, dost in the dK/dV pass) are stored head-grouped,
+// [N, H / G, d, G]: element (n, h, c) at n d H + (h / G) d G + c G + h % G, so channel c of a block's HB heads is
+// one chunk of consecutive scalars and the channels of a chunk lie G apart. G = 0 stands for channel-major
+// [N, d, H] (G = H, known only at run time: the CUDA kernels). The CPU kernels use G = HB, a compile-time channel
+// stride: with the run-time stride GCC kept the d channel offsets of a key on the stack and reloaded one per FMA.
+template <int G>
+struct Streamed {
+  int H;
+  RANA_HD int stride() const { return G ? G : H; }
+  // the chunk of entry n, heads h0.., channel 0; d channels per head. With G > 0, h0 is a multiple of G (the
+  // chunk starts a group)
+  RANA_HD int64_t at(int64_t n, int d, int h0) const { return n * d * H + (G ? int64_t(h0) * d : h0); }
+};
+
 // The bias and mask of one key pixel for every lane: disc row r, x as for lane_bias. With a permute table (float,
 // 16 lanes, AVX-512) a permute and two compares; otherwise the gather of lane_bias.
 template <typename V>
@@ -567,6 +581,21 @@ RANA_HD void axpy_rows(V* acc, V w, const typename Lanes<V>::T* __restrict__ row
   for (int c = 0; c < D; ++c) acc[c] += w * load_chunk<V, HB>(row + c * H);
 }
 
+// acc[c] += w[i] * chunk(base + idx[i] * row_size + c * stride) for i < nb, c < D: the weighted sum of nb streamed
+// rows. acc lives in memory (keep_in_memory) and is held in registers through the loop. (In two passes of 8
+// channels, so that AVX2's 16 registers need not spill two of 16 accumulators, it measured no faster.)
+template <typename V, int HB, int D>
+RANA_HD void accumulate_rows(V* acc, const V* w, int nb, const typename Lanes<V>::T* __restrict__ base,
+                             const int64_t* idx, int64_t row_size, int stride) {
+  V r[D];
+  RANA_UNROLL
+  for (int c = 0; c < D; ++c) r[c] = acc[c];
+  for (int i = 0; i < nb; ++i) axpy_rows<V, HB, D>(r, w[i], base + idx[i] * row_size, stride);
+  RANA_UNROLL
+  for (int c = 0; c < D; ++c) acc[c] = r[c];
+  keep_in_memory(acc);
+}
+
 // Loads the block's rows of x (times mul) into D lane vectors (0 for padding lanes). Staged through a scalar
 // array: writing single lanes of out[] would force the whole array into memory.
 template <typename V, int HB, int D>
@@ -615,11 +644,11 @@ RANA_HD V load_lane_scalars(const typename Lanes<V>::T* x, const Block<Lanes<V>:
 // Streams the logits of a query block against every key of the walk into the buffer s (key indices in key),
 // calling flush(nb) whenever the buffer is full and once at the end. The value rows a flush will read (vt, dv
 // channels) are prefetched meanwhile. Shared by the forward and the dQ pass.
-template <typename V, int HB, int DK, int NB, typename W, typename F>
+template <typename V, int HB, int DK, int NB, int G, typename W, typename F>
 RANA_HD void stream_logits(const Op<typename Lanes<V>::T>& op, const LaneTable<Lanes<V>::L>& lt, W& walk, int h0,
                            const V* qr, const typename Lanes<V>::T* __restrict__ kt,
                            const typename Lanes<V>::T* __restrict__ vt, int dv, V* s, int64_t* key, F& flush) {
-  const int H = op.H;
+  const Streamed<G> st{op.H};
   int r;
   int32_t x;
   int64_t first, last;
@@ -631,8 +660,8 @@ RANA_HD void stream_logits(const Op<typename Lanes<V>::T>& op, const LaneTable<L
         flush(nb);
         nb = 0;
       }
-      RANA_PREFETCH(vt + j * dv * H);
-      s[nb] = dot_rows<V, HB, DK>(qr, kt + j * DK * H + h0, H, bv);
+      RANA_PREFETCH(vt + st.at(j, dv, h0));
+      s[nb] = dot_rows<V, HB, DK>(qr, kt + st.at(j, DK, h0), st.stride(), splat<V>(0)) + bv;
       key[nb++] = j;
     }
   }
@@ -641,10 +670,10 @@ RANA_HD void stream_logits(const Op<typename Lanes<V>::T>& op, const LaneTable<L
 
 // ---- forward: one query block, heads h0 .. h0 + HB - 1 --------------------------------------------------
 // Online softmax over the keys of the block's discs, buffered: logits of up to NB keys are kept, then one step
-// per full buffer rescales and accumulates p * v. q [Nq, H, DK] (any Operand layout); kt [Nk, DK, H] and
-// vt [Nk, DV, H] (channel-major per key, so one load serves HB heads). Writes out [Nq, H, DV] and lse [Nq, H]
-// (-inf and zeros for a query whose disc holds no key bins).
-template <typename V, int HB, int DK, int DV, int NB, typename W>
+// per full buffer rescales and accumulates p * v. q [Nq, H, DK] (any Operand layout); kt and vt head-grouped
+// (Streamed<G>: one load serves HB heads). Writes out [Nq, H, DV] and lse [Nq, H] (-inf and zeros for a query whose
+// disc holds no key bins).
+template <typename V, int HB, int DK, int DV, int NB, int G, typename W>
 RANA_HD void forward_block(const Op<typename Lanes<V>::T>& op, const Block<Lanes<V>::L / HB>& b,
                            const LaneTable<Lanes<V>::L>& lt, W walk, int h0,
                            const Operand<typename Lanes<V>::T>& q, const typename Lanes<V>::T* __restrict__ kt,
@@ -652,6 +681,7 @@ RANA_HD void forward_block(const Op<typename Lanes<V>::T>& op, const Block<Lanes
                            typename Lanes<V>::T* lse) {
   using T = typename Lanes<V>::T;
   const int H = op.H;
+  const Streamed<G> st{H};
   V qr[DK], acc_mem[DV];
   load_lanes<V, HB, DK>(q, b, h0, op.logit_scale(), qr);
   RANA_UNROLL
@@ -663,9 +693,6 @@ RANA_HD void forward_block(const Op<typename Lanes<V>::T>& op, const Block<Lanes
   // nb (entries in the buffer) is passed by value: captured by reference it lived in memory, and the store and
   // reload on every key became the loop's critical path
   auto flush = [&](int nb) RANA_NOINLINE {
-    V acc[DV];
-    RANA_UNROLL
-    for (int c = 0; c < DV; ++c) acc[c] = acc_mem[c];
     V mx0 = splat<V>(neg_inf<T>()), mx1 = mx0, mx2 = mx0, mx3 = mx0;  // four chains
     int i = 0;
     for (; i + 4 <= nb; i += 4) {
@@ -681,7 +708,7 @@ RANA_HD void forward_block(const Op<typename Lanes<V>::T>& op, const Block<Lanes
     const V corr = fast_exp2(m - base);
     l *= corr;
     RANA_UNROLL
-    for (int c = 0; c < DV; ++c) acc[c] *= corr;
+    for (int c = 0; c < DV; ++c) acc_mem[c] *= corr;
     // two loops: the exp chains are long, and a loop of only exps keeps many in flight
     V sum = splat<V>(0);
     for (int i = 0; i < nb; ++i) {
@@ -689,13 +716,10 @@ RANA_HD void forward_block(const Op<typename Lanes<V>::T>& op, const Block<Lanes
       sum += s[i];
     }
     l += sum;
-    for (int i = 0; i < nb; ++i) axpy_rows<V, HB, DV>(acc, s[i], vt + key[i] * DV * H + h0, H);
-    RANA_UNROLL
-    for (int c = 0; c < DV; ++c) acc_mem[c] = acc[c];
-    keep_in_memory(acc_mem);
+    accumulate_rows<V, HB, DV>(acc_mem, s, nb, vt + st.at(0, DV, h0), key, int64_t(DV) * H, st.stride());
     m = mn;
   };
-  stream_logits<V, HB, DK, NB>(op, lt, walk, h0, qr, kt, vt, DV, s, key, flush);
+  stream_logits<V, HB, DK, NB, G>(op, lt, walk, h0, qr, kt, vt, DV, s, key, flush);
   const V empty = l == T(0) ? splat<V>(1) : splat<V>(0);
   const V inv = T(1) / (l + empty);
   RANA_UNROLL
@@ -710,7 +734,7 @@ RANA_HD void forward_block(const Op<typename Lanes<V>::T>& op, const Block<Lanes
 // FlashAttention-2: p = exp(s - lse), ds = p (dO.v - delta), dq = scale sum ds k. lse must be +inf (not -inf)
 // for queries with an empty disc, giving p = 0. q, dout [Nq, H, d] (Operands), lse, delta [Nq, H]; kt, vt as in the
 // forward. Writes dq [Nq, H, DK].
-template <typename V, int HB, int DK, int DV, int NB, typename W>
+template <typename V, int HB, int DK, int DV, int NB, int G, typename W>
 RANA_HD void backward_dq_block(const Op<typename Lanes<V>::T>& op, const Block<Lanes<V>::L / HB>& b,
                                const LaneTable<Lanes<V>::L>& lt, W walk, int h0,
                                const Operand<typename Lanes<V>::T>& q, const Operand<typename Lanes<V>::T>& dout,
@@ -719,6 +743,7 @@ RANA_HD void backward_dq_block(const Op<typename Lanes<V>::T>& op, const Block<L
                                const typename Lanes<V>::T* __restrict__ vt, const Output<typename Lanes<V>::T>& dq) {
   using T = typename Lanes<V>::T;
   const int H = op.H;
+  const Streamed<G> st{H};
   V qr[DK], acc_mem[DK];
   load_lanes<V, HB, DK>(q, b, h0, op.logit_scale(), qr);
   RANA_UNROLL
@@ -733,19 +758,13 @@ RANA_HD void backward_dq_block(const Op<typename Lanes<V>::T>& op, const Block<L
       V dr[DV];
       load_lanes<V, HB, DV>(dout, b, h0, T(1), dr);
       for (int i = 0; i < nb; ++i) {
-        const V dp = dot_rows<V, HB, DV>(dr, vt + key[i] * DV * H + h0, H, splat<V>(0));
+        const V dp = dot_rows<V, HB, DV>(dr, vt + st.at(key[i], DV, h0), st.stride(), splat<V>(0));
         s[i] = fast_exp2(s[i] - L) * (dp - D);
       }
     }
-    V acc[DK];
-    RANA_UNROLL
-    for (int c = 0; c < DK; ++c) acc[c] = acc_mem[c];
-    for (int i = 0; i < nb; ++i) axpy_rows<V, HB, DK>(acc, s[i], kt + key[i] * DK * H + h0, H);
-    RANA_UNROLL
-    for (int c = 0; c < DK; ++c) acc_mem[c] = acc[c];
-    keep_in_memory(acc_mem);
+    accumulate_rows<V, HB, DK>(acc_mem, s, nb, kt + st.at(0, DK, h0), key, int64_t(DK) * H, st.stride());
   };
-  stream_logits<V, HB, DK, NB>(op, lt, walk, h0, qr, kt, vt, DV, s, key, flush);
+  stream_logits<V, HB, DK, NB, G>(op, lt, walk, h0, qr, kt, vt, DV, s, key, flush);
   RANA_UNROLL
   for (int c = 0; c < DK; ++c) acc_mem[c] *= op.scale;
   store_lanes<V, HB, DK>(acc_mem, b, h0, dq);
@@ -753,11 +772,11 @@ RANA_HD void backward_dq_block(const Op<typename Lanes<V>::T>& op, const Block<L
 
 // ---- backward, dK and dV: one key block, heads h0 .. h0 + HB - 1 -----------------------------------------
 // From the reverse neighbourhood: the queries whose disc holds a key of the block, sorted by centre pixel and
-// given in that order: qst [Nq, DK, H], dost [Nq, DV, H] (channel-major), lse_s, delta_s [Nq, H] (lse +inf for
+// given in that order: qst, dost head-grouped (Streamed<G>), lse_s, delta_s [Nq, H] (lse +inf for
 // queries with an empty disc). k, v [Nk, H, d] (Operands). Sums run in a fixed order without atomics. dbias_lanes (may be
 // null): per-lane accumulators [rows.n][tw][L], ds added at (r, centre + dx, lane); the caller sums them into
 // the bias gradient of each lane's head.
-template <typename V, int HB, int DK, int DV, int NB, typename W>
+template <typename V, int HB, int DK, int DV, int NB, int G, typename W>
 RANA_HD void backward_dkdv_block(const Op<typename Lanes<V>::T>& op, const Block<Lanes<V>::L / HB>& b,
                                  const LaneTable<Lanes<V>::L>& lt, W walk, int h0,
                                  const typename Lanes<V>::T* __restrict__ qst,
@@ -769,6 +788,7 @@ RANA_HD void backward_dkdv_block(const Op<typename Lanes<V>::T>& op, const Block
   using T = typename Lanes<V>::T;
   constexpr int L = Lanes<V>::L;
   const int H = op.H, tw = table_width(op.rows.R), o = table_centre(op.rows.R);
+  const Streamed<G> st{H};
   V acc_k[DK], acc_v[DV];
   RANA_UNROLL
   for (int c = 0; c < DK; ++c) acc_k[c] = splat<V>(0);
@@ -784,30 +804,14 @@ RANA_HD void backward_dkdv_block(const Op<typename Lanes<V>::T>& op, const Block
       V vr[DV];
       load_lanes<V, HB, DV>(v, b, h0, T(1), vr);
       for (int i = 0; i < nb; ++i) {
-        const V dp = dot_rows<V, HB, DV>(vr, dost + qid[i] * DV * H + h0, H, splat<V>(0));
+        const V dp = dot_rows<V, HB, DV>(vr, dost + st.at(qid[i], DV, h0), st.stride(), splat<V>(0));
         const V pi = fast_exp2(s[i] - load_chunk<V, HB>(lse_s + qid[i] * H + h0) * T(kLog2e));
         p[i] = pi;
         s[i] = pi * (dp - load_chunk<V, HB>(delta_s + qid[i] * H + h0));
       }
     }
-    {
-      V acc[DV];
-      RANA_UNROLL
-      for (int c = 0; c < DV; ++c) acc[c] = acc_v[c];
-      for (int i = 0; i < nb; ++i) axpy_rows<V, HB, DV>(acc, p[i], dost + qid[i] * DV * H + h0, H);
-      RANA_UNROLL
-      for (int c = 0; c < DV; ++c) acc_v[c] = acc[c];
-      keep_in_memory(acc_v);
-    }
-    {
-      V acc[DK];
-      RANA_UNROLL
-      for (int c = 0; c < DK; ++c) acc[c] = acc_k[c];
-      for (int i = 0; i < nb; ++i) axpy_rows<V, HB, DK>(acc, s[i], qst + qid[i] * DK * H + h0, H);
-      RANA_UNROLL
-      for (int c = 0; c < DK; ++c) acc_k[c] = acc[c];
-      keep_in_memory(acc_k);
-    }
+    accumulate_rows<V, HB, DV>(acc_v, p, nb, dost + st.at(0, DV, h0), qid, int64_t(DV) * H, st.stride());
+    accumulate_rows<V, HB, DK>(acc_k, s, nb, qst + st.at(0, DK, h0), qid, int64_t(DK) * H, st.stride());
     if (dbias_lanes) {  // ds summed over the queries of one pixel, then added per lane at its own dx
       for (int i = 0; i < nb;) {
         V sum = s[i];
@@ -836,8 +840,8 @@ RANA_HD void backward_dkdv_block(const Op<typename Lanes<V>::T>& op, const Block
           flush(nb);
           nb = 0;
         }
-        RANA_PREFETCH(dost + i * DV * H);
-        s[nb] = dot_rows<V, HB, DK>(kr, qst + i * DK * H + h0, H, bv);
+        RANA_PREFETCH(dost + st.at(i, DV, h0));
+        s[nb] = dot_rows<V, HB, DK>(kr, qst + st.at(i, DK, h0), st.stride(), splat<V>(0)) + bv;
         qid[nb] = i;
         tag[nb++] = r * tw + o - x;
       }
