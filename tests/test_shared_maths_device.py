@@ -37,10 +37,10 @@ __global__ void smoke(Op<float> op, const float* q, const float* kt, const float
   const PixelWalk queries{op.g, op.rows, q_ptr, -1, b.y, b.x0, 0};
   const Operand<float> qo{q, op.H * 16, 16, 1}, dout_o{dout, op.H * 16, 16, 1};
   const Operand<float> ko{k, op.H * 16, 16, 1}, vo{v, op.H * 16, 16, 1};
-  forward_block<float, 1, 16, 16, 32>(op, b, lq, keys, h, qo, kt, vt, out, lse_out);
+  forward_block<float, 1, 16, 16, 32, 0>(op, b, lq, keys, h, qo, kt, vt, out, lse_out);
   const Output<float> dq_o{dq, op.H * 16, 16, 1}, dk_o{dk, op.H * 16, 16, 1}, dv_o{dv, op.H * 16, 16, 1};
-  backward_dq_block<float, 1, 16, 16, 32>(op, b, lq, keys, h, qo, dout_o, lse, delta, kt, vt, dq_o);
-  backward_dkdv_block<float, 1, 16, 16, 32>(op, b, lk, queries, h, qst, dost, lse, delta, ko, vo, dk_o, dv_o,
+  backward_dq_block<float, 1, 16, 16, 32, 0>(op, b, lq, keys, h, qo, dout_o, lse, delta, kt, vt, dq_o);
+  backward_dkdv_block<float, 1, 16, 16, 32, 0>(op, b, lk, queries, h, qst, dost, lse, delta, ko, vo, dk_o, dv_o,
                                             dbias_lanes);
 }
 """
