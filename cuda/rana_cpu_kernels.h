@@ -4,7 +4,8 @@
 // rana_cpu_other.cpp) compile without torch's headers and in parallel; rana_cpu.cpp binds them to torch.
 //
 // Work is organised in blocks (rana_math.h): entries of one grid row on at most kMaxSpan + 1 consecutive pixels,
-// HB heads of each, one (entry, head) per SIMD lane (L = 16 floats and 8 doubles with AVX-512, half as many on other CPUs).
+// HB heads of each, one (entry, head) per SIMD lane (L = 16 floats and 8 doubles with AVX-512, half as many on
+// other CPUs).
 // Forward: online softmax per query block, saving the log-sum-exp.
 // Backward (FlashAttention-2 style, probabilities recomputed from the log-sum-exp):
 //   pass 1, per query block: dQ;

@@ -563,8 +563,8 @@ RANA_HD V load_chunk(const typename Lanes<V>::T* p) {
 
 // sum_c a[c] * chunk(row + c * H) over D channels, two independent FMA chains
 template <typename V, int HB, int D>
-RANA_HD V dot_rows(const V* a, const typename Lanes<V>::T* __restrict__ row, int H, V init) {
-  V s0 = init, s1 = splat<V>(0);
+RANA_HD V dot_rows(const V* a, const typename Lanes<V>::T* __restrict__ row, int H) {
+  V s0 = splat<V>(0), s1 = splat<V>(0);
   RANA_UNROLL
   for (int c = 0; c + 1 < D; c += 2) {
     s0 += a[c] * load_chunk<V, HB>(row + c * H);
@@ -581,16 +581,16 @@ RANA_HD void axpy_rows(V* acc, V w, const typename Lanes<V>::T* __restrict__ row
   for (int c = 0; c < D; ++c) acc[c] += w * load_chunk<V, HB>(row + c * H);
 }
 
-// acc[c] += w[i] * chunk(base + idx[i] * row_size + c * stride) for i < nb, c < D: the weighted sum of nb streamed
-// rows. acc lives in memory (keep_in_memory) and is held in registers through the loop. (In two passes of 8
-// channels, so that AVX2's 16 registers need not spill two of 16 accumulators, it measured no faster.)
-template <typename V, int HB, int D>
-RANA_HD void accumulate_rows(V* acc, const V* w, int nb, const typename Lanes<V>::T* __restrict__ base,
-                             const int64_t* idx, int64_t row_size, int stride) {
+// acc[c] += w[i] * chunk(entry idx[i] of x, channel c) for i < nb, c < D: the weighted sum of nb streamed rows
+// (heads h0.., layout st). acc lives in memory (keep_in_memory) and is held in registers through the loop. (In two
+// passes of 8 channels, so that AVX2's 16 registers need not spill two of 16 accumulators, it measured no faster.)
+template <typename V, int HB, int D, int G>
+RANA_HD void accumulate_rows(V* acc, const V* w, int nb, const typename Lanes<V>::T* __restrict__ x,
+                             const int64_t* idx, const Streamed<G>& st, int h0) {
   V r[D];
   RANA_UNROLL
   for (int c = 0; c < D; ++c) r[c] = acc[c];
-  for (int i = 0; i < nb; ++i) axpy_rows<V, HB, D>(r, w[i], base + idx[i] * row_size, stride);
+  for (int i = 0; i < nb; ++i) axpy_rows<V, HB, D>(r, w[i], x + st.at(idx[i], D, h0), st.stride());
   RANA_UNROLL
   for (int c = 0; c < D; ++c) acc[c] = r[c];
   keep_in_memory(acc);
@@ -661,7 +661,7 @@ RANA_HD void stream_logits(const Op<typename Lanes<V>::T>& op, const LaneTable<L
         nb = 0;
       }
       RANA_PREFETCH(vt + st.at(j, dv, h0));
-      s[nb] = dot_rows<V, HB, DK>(qr, kt + st.at(j, DK, h0), st.stride(), splat<V>(0)) + bv;
+      s[nb] = dot_rows<V, HB, DK>(qr, kt + st.at(j, DK, h0), st.stride()) + bv;
       key[nb++] = j;
     }
   }
@@ -716,7 +716,7 @@ RANA_HD void forward_block(const Op<typename Lanes<V>::T>& op, const Block<Lanes
       sum += s[i];
     }
     l += sum;
-    accumulate_rows<V, HB, DV>(acc_mem, s, nb, vt + st.at(0, DV, h0), key, int64_t(DV) * H, st.stride());
+    accumulate_rows<V, HB, DV>(acc_mem, s, nb, vt, key, st, h0);
     m = mn;
   };
   stream_logits<V, HB, DK, NB, G>(op, lt, walk, h0, qr, kt, vt, DV, s, key, flush);
@@ -758,11 +758,11 @@ RANA_HD void backward_dq_block(const Op<typename Lanes<V>::T>& op, const Block<L
       V dr[DV];
       load_lanes<V, HB, DV>(dout, b, h0, T(1), dr);
       for (int i = 0; i < nb; ++i) {
-        const V dp = dot_rows<V, HB, DV>(dr, vt + st.at(key[i], DV, h0), st.stride(), splat<V>(0));
+        const V dp = dot_rows<V, HB, DV>(dr, vt + st.at(key[i], DV, h0), st.stride());
         s[i] = fast_exp2(s[i] - L) * (dp - D);
       }
     }
-    accumulate_rows<V, HB, DK>(acc_mem, s, nb, kt + st.at(0, DK, h0), key, int64_t(DK) * H, st.stride());
+    accumulate_rows<V, HB, DK>(acc_mem, s, nb, kt, key, st, h0);
   };
   stream_logits<V, HB, DK, NB, G>(op, lt, walk, h0, qr, kt, vt, DV, s, key, flush);
   RANA_UNROLL
@@ -804,14 +804,14 @@ RANA_HD void backward_dkdv_block(const Op<typename Lanes<V>::T>& op, const Block
       V vr[DV];
       load_lanes<V, HB, DV>(v, b, h0, T(1), vr);
       for (int i = 0; i < nb; ++i) {
-        const V dp = dot_rows<V, HB, DV>(vr, dost + st.at(qid[i], DV, h0), st.stride(), splat<V>(0));
+        const V dp = dot_rows<V, HB, DV>(vr, dost + st.at(qid[i], DV, h0), st.stride());
         const V pi = fast_exp2(s[i] - load_chunk<V, HB>(lse_s + qid[i] * H + h0) * T(kLog2e));
         p[i] = pi;
         s[i] = pi * (dp - load_chunk<V, HB>(delta_s + qid[i] * H + h0));
       }
     }
-    accumulate_rows<V, HB, DV>(acc_v, p, nb, dost + st.at(0, DV, h0), qid, int64_t(DV) * H, st.stride());
-    accumulate_rows<V, HB, DK>(acc_k, s, nb, qst + st.at(0, DK, h0), qid, int64_t(DK) * H, st.stride());
+    accumulate_rows<V, HB, DV>(acc_v, p, nb, dost, qid, st, h0);
+    accumulate_rows<V, HB, DK>(acc_k, s, nb, qst, qid, st, h0);
     if (dbias_lanes) {  // ds summed over the queries of one pixel, then added per lane at its own dx
       for (int i = 0; i < nb;) {
         V sum = s[i];
@@ -841,7 +841,7 @@ RANA_HD void backward_dkdv_block(const Op<typename Lanes<V>::T>& op, const Block
           nb = 0;
         }
         RANA_PREFETCH(dost + st.at(i, DV, h0));
-        s[nb] = dot_rows<V, HB, DK>(kr, qst + st.at(i, DK, h0), st.stride(), splat<V>(0)) + bv;
+        s[nb] = dot_rows<V, HB, DK>(kr, qst + st.at(i, DK, h0), st.stride()) + bv;
         qid[nb] = i;
         tag[nb++] = r * tw + o - x;
       }

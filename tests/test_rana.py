@@ -46,8 +46,8 @@ def layouts(h=7, w=6, seed=0):
 
 CASES = [(name, radius, with_bias) for name in ("self", "down", "up", "temporal")
          for radius, with_bias in ((0.0, False), (1.0, True), (2.5, True), (2.5, False))]
-# "cpu": one query (and head) per SIMD lane, 16 floats or 8 doubles per block with AVX-512, half that with AVX2; "cpu-scalar": the same bodies with one lane per block,
-# exactly as a GPU thread runs them.
+# "cpu": one query (and head) per SIMD lane, 16 floats or 8 doubles per block with AVX-512, half that with AVX2;
+# "cpu-scalar": the same bodies with one lane per block, exactly as a GPU thread runs them.
 KERNELS = ("cpu", "cpu-scalar")
 
 
