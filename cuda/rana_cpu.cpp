@@ -140,22 +140,23 @@ std::vector<torch::Tensor> rana_forward(torch::Tensor q, torch::Tensor k, torch:
 }
 
 std::vector<torch::Tensor> rana_backward(torch::Tensor dout, torch::Tensor q, torch::Tensor k, torch::Tensor v,
-                                         torch::Tensor lse, torch::Tensor delta, torch::Tensor q_pixels,
+                                         torch::Tensor out, torch::Tensor lse, torch::Tensor q_pixels,
                                          torch::Tensor k_offsets, int64_t Hk, int64_t Wk, torch::Tensor rows_dy,
                                          torch::Tensor rows_dx0, torch::Tensor rows_dx1, int64_t R,
                                          c10::optional<torch::Tensor> bias, double scale, bool need_dbias,
                                          bool scalar_lanes) {
   check_inputs(q, k, v, q_pixels, k_offsets, Hk, Wk);
-  TORCH_CHECK(dout.is_contiguous() && lse.is_contiguous() && delta.is_contiguous(), "grads must be contiguous");
+  TORCH_CHECK(dout.is_contiguous() && lse.is_contiguous(), "grads must be contiguous");
   const int64_t H = q.size(1), dk = q.size(2), dv = v.size(2);
   const Plan pl = plan_for(H, dk, dv, q.scalar_type() == torch::kDouble, scalar_lanes);
   const QueryOrder qo = order_queries(q_pixels, Hk, Wk);
   const auto qp = pad_to(q, pl.H, pl.dk), kp = pad_to(k, pl.H, pl.dk), vp = pad_to(v, pl.H, pl.dv),
              dop = pad_to(dout, pl.H, pl.dv);
-  // queries with an empty disc (and padding heads): lse +inf gives them probability 0 everywhere
-  const auto lse_pos = pad_heads(torch::where(torch::isinf(lse), torch::full_like(lse, INFINITY), lse), pl.H,
-                                 INFINITY);
-  const auto delta_p = pad_heads(delta, pl.H, 0.0);
+  const int64_t nq = q.size(0);
+  // the kernels read lse and out with the padded heads (and out's padded channels); the dQ pass turns lse into
+  // lse_pos (+inf for empty discs and padding heads) and computes delta = dout . out, both for the dK/dV pass
+  const auto outp = pad_to(out, pl.H, pl.dv), lse_p = pad_heads(lse, pl.H, -INFINITY);
+  auto lse_pos = rana_cpu_buffers::empty({nq, pl.H}, q.options()), delta = rana_cpu_buffers::empty({nq, pl.H}, q.options());
   const auto cached = [](at::IntArrayRef s, const torch::TensorOptions& o) { return rana_cpu_buffers::empty(s, o); };
   auto dq = empty_like_layout(qp, qp.size(0), pl.H, pl.dk, cached);
   auto dk_t = empty_like_layout(kp, kp.size(0), pl.H, pl.dk, cached);
@@ -168,16 +169,16 @@ std::vector<torch::Tensor> rana_backward(torch::Tensor dout, torch::Tensor q, to
     with_kernel<T>(pl, [&]<typename V, int HB>() {
       {  // pass 1: dQ per query block
         const auto kt = head_grouped(kp, pl.HB), vt = head_grouped(vp, pl.HB);
-        rana_cpu::backward_dq<T, V, HB>(t.op, operand<T>(qp), operand<T>(dop), lse_pos.data_ptr<T>(),
-                                        delta_p.data_ptr<T>(), kt.data_ptr<T>(), vt.data_ptr<T>(), qo.index(),
-                                        output<T>(dq), threads());
+        rana_cpu::backward_dq<T, V, HB>(t.op, operand<T>(qp), operand<T>(dop), operand<T>(outp),
+                                        lse_p.data_ptr<T>(), lse_pos.data_ptr<T>(), delta.data_ptr<T>(),
+                                        kt.data_ptr<T>(), vt.data_ptr<T>(), qo.index(), output<T>(dq), threads());
       }
       // pass 2: dK, dV per key block; the queries' operands in pixel order
       auto sorted = [&](const torch::Tensor& x) -> torch::Tensor {  // keeps a channel-major view's layout
         return qo.identity ? x : x.index_select(0, qo.order);
       };
       const torch::Tensor qst = head_grouped(sorted(qp), pl.HB), dost = head_grouped(sorted(dop), pl.HB),
-                          lse_s = sorted(lse_pos).contiguous(), delta_s = sorted(delta_p).contiguous();
+                          lse_s = sorted(lse_pos).contiguous(), delta_s = sorted(delta).contiguous();
       rana_cpu::backward_dkdv<T, V, HB>(t.op, qst.data_ptr<T>(), dost.data_ptr<T>(), lse_s.data_ptr<T>(),
                                         delta_s.data_ptr<T>(), operand<T>(kp), operand<T>(vp), qo.ptr.data(),
                                         output<T>(dk_t), output<T>(dv_t),

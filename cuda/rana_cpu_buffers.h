@@ -4,9 +4,10 @@
 // the op paid the kernel for zero-filling its outputs page by page (a 512x512 forward: ~200 MB of output, about
 // 8% of the call). A buffer returned here goes to a small idle list instead, and the next request of a similar
 // size takes it with its pages already mapped. Every byte of a buffer handed out is written by the kernels (or by
-// the copy that fills it) before it is read, so reuse needs no clearing.
+// the copy that fills it) before it is read, so reuse needs no clearing. The [Nq, H] per-row buffers of the
+// backward (~13 MB at 512x512) are served too: as fresh torch tensors each cost ~20 ms of page faults there.
 //
-// Bounded: idle buffers are kept up to RANAD_RANA_BUFFER_CACHE_MB (default 1024; 0 turns the cache off), oldest
+// Bounded: idle buffers are kept up to RANAD_RANA_BUFFER_CACHE_MB (default 2048; 0 turns the cache off), oldest
 // freed first beyond it, and a request only takes a buffer at most 1.25x its size.
 #pragma once
 
@@ -23,7 +24,7 @@
 
 namespace rana_cpu_buffers {
 
-constexpr size_t kMinBytes = size_t(32) << 20;  // smaller allocations come from glibc's heap and are reused there
+constexpr size_t kMinBytes = size_t(4) << 20;  // smaller ones come from glibc's heap and are reused there
 constexpr size_t kAlign = size_t(2) << 20;      // huge-page aligned (transparent huge pages where allowed)
 
 class Cache {
@@ -80,7 +81,7 @@ class Cache {
  private:
   Cache() {
     const char* env = std::getenv("RANAD_RANA_BUFFER_CACHE_MB");
-    limit_ = (env ? size_t(std::strtoull(env, nullptr, 10)) : size_t(1024)) << 20;
+    limit_ = (env ? size_t(std::strtoull(env, nullptr, 10)) : size_t(2048)) << 20;
   }
   std::mutex mu_;
   std::deque<std::pair<void*, size_t>> idle_;
