@@ -561,17 +561,16 @@ RANA_HD V load_chunk(const typename Lanes<V>::T* p) {
   }
 }
 
-// sum_c a[c] * chunk(row + c * H) over D channels, two independent FMA chains
+// sum_c a[c] * chunk(row + c * H) over D channels, in four independent FMA chains (channel c in chain c % 4): the
+// logit of one key is a dependency chain of D / 4 FMAs plus two adds rather than D / 2 plus one, which the
+// out-of-order core, holding only a few keys' worth of work, could not hide (the logit loops ran at the chains'
+// latency)
 template <typename V, int HB, int D>
 RANA_HD V dot_rows(const V* a, const typename Lanes<V>::T* __restrict__ row, int H) {
-  V s0 = splat<V>(0), s1 = splat<V>(0);
+  V s[4] = {splat<V>(0), splat<V>(0), splat<V>(0), splat<V>(0)};
   RANA_UNROLL
-  for (int c = 0; c + 1 < D; c += 2) {
-    s0 += a[c] * load_chunk<V, HB>(row + c * H);
-    s1 += a[c + 1] * load_chunk<V, HB>(row + (c + 1) * H);
-  }
-  if constexpr (D % 2) s0 += a[D - 1] * load_chunk<V, HB>(row + (D - 1) * H);
-  return s0 + s1;
+  for (int c = 0; c < D; ++c) s[c % 4] += a[c] * load_chunk<V, HB>(row + c * H);
+  return (s[0] + s[1]) + (s[2] + s[3]);
 }
 
 // acc[c] += w * chunk(row + c * H)
@@ -584,9 +583,58 @@ RANA_HD void axpy_rows(V* acc, V w, const typename Lanes<V>::T* __restrict__ row
 // acc[c] += w[i] * chunk(entry idx[i] of x, channel c) for i < nb, c < D: the weighted sum of nb streamed rows
 // (heads h0.., layout st). acc lives in memory (keep_in_memory) and is held in registers through the loop. (In two
 // passes of 8 channels, so that AVX2's 16 registers need not spill two of 16 accumulators, it measured no faster.)
+#if defined(__AVX512F__) && !defined(__CUDACC__)
+// Four vectors of four 128-bit blocks, transposed as a 4 x 4 matrix of blocks: out[i] block j = in[j] block i.
+inline void transpose_blocks4(const __m512* in, __m512* out) {
+  const __m512 t0 = _mm512_shuffle_f32x4(in[0], in[1], 0x44), t1 = _mm512_shuffle_f32x4(in[0], in[1], 0xEE);
+  const __m512 t2 = _mm512_shuffle_f32x4(in[2], in[3], 0x44), t3 = _mm512_shuffle_f32x4(in[2], in[3], 0xEE);
+  out[0] = _mm512_shuffle_f32x4(t0, t2, 0x88);
+  out[1] = _mm512_shuffle_f32x4(t0, t2, 0xDD);
+  out[2] = _mm512_shuffle_f32x4(t1, t3, 0x88);
+  out[3] = _mm512_shuffle_f32x4(t1, t3, 0xDD);
+}
+
+// accumulate_rows for 16 lanes of 4 entries x 4 heads over rows head-grouped by 4 (G = 4): a row's channels
+// 4g..4g+3 of the 4 heads are one plain 16-float load, so each step multiplies that load by entry e's weights (its
+// 128-bit block of w, repeated by one shuffle) into accumulators laid out (channel, head) per entry, and a key
+// costs D / 4 loads, 4 shuffles and D FMAs instead of D broadcast-loads and D FMAs (the broadcasts made the
+// accumulation ~a quarter of the forward). The accumulators are transposed into and out of that layout once per
+// call (a 4 x 4 block transpose per 4 channels).
+template <int D>
+inline void accumulate_rows_by_entry(__m512* acc, const __m512* w, int nb, const float* __restrict__ x,
+                                     const int64_t* idx, int64_t row_stride, int64_t head_offset) {
+  __m512 r[D];  // r[4 g + e]: entry e, channels 4g.. (lane 4 cl + h: channel 4g + cl, head h)
+  RANA_UNROLL
+  for (int g = 0; g < D / 4; ++g) transpose_blocks4(acc + 4 * g, r + 4 * g);
+  for (int i = 0; i < nb; ++i) {
+    const float* row = x + idx[i] * row_stride + head_offset;
+    const __m512 wi = w[i];
+    const __m512 we[4] = {_mm512_shuffle_f32x4(wi, wi, 0x00), _mm512_shuffle_f32x4(wi, wi, 0x55),
+                          _mm512_shuffle_f32x4(wi, wi, 0xAA), _mm512_shuffle_f32x4(wi, wi, 0xFF)};
+    RANA_UNROLL
+    for (int g = 0; g < D / 4; ++g) {
+      const __m512 xv = _mm512_loadu_ps(row + 16 * g);
+      RANA_UNROLL
+      for (int e = 0; e < 4; ++e) r[4 * g + e] = _mm512_fmadd_ps(we[e], xv, r[4 * g + e]);
+    }
+  }
+  RANA_UNROLL
+  for (int g = 0; g < D / 4; ++g) transpose_blocks4(r + 4 * g, acc + 4 * g);
+}
+#endif
+
 template <typename V, int HB, int D, int G>
 RANA_HD void accumulate_rows(V* acc, const V* w, int nb, const typename Lanes<V>::T* __restrict__ x,
                              const int64_t* idx, const Streamed<G>& st, int h0) {
+#if defined(__AVX512F__) && !defined(__CUDACC__)
+  if constexpr (Lanes<V>::L == 16 && sizeof(typename Lanes<V>::T) == 4 && HB == 4 && G == 4 && D % 4 == 0) {
+    // st.at(n, D, h0) = n D H + h0 D for G > 0
+    accumulate_rows_by_entry<D>(reinterpret_cast<__m512*>(acc), reinterpret_cast<const __m512*>(w), nb, x, idx,
+                                int64_t(D) * st.H, int64_t(h0) * D);
+    keep_in_memory(acc);
+    return;
+  }
+#endif
   V r[D];
   RANA_UNROLL
   for (int c = 0; c < D; ++c) r[c] = acc[c];
@@ -817,10 +865,14 @@ RANA_HD void backward_dkdv_block(const Op<typename Lanes<V>::T>& op, const Block
         V sum = s[i];
         int e = i + 1;
         for (; e < nb && tag[e] == tag[i]; ++e) sum += s[e];
-        // lane-minor tables: an entry's HB lanes are HB consecutive floats (one short vector add on the CPU)
+        // lane-minor tables: an entry's HB lanes are HB consecutive floats, added from a copy of the vector (one
+        // short vector add per entry on the CPU; lane by lane, each of the L lanes cost an extract)
+        T sum_lanes[L];
+        std::memcpy(sum_lanes, &sum, sizeof(V));
         for (int e = 0; e < b.n; ++e) {
-          typename Lanes<V>::T* dst = dbias_lanes + int64_t(tag[i] + b.rel[e]) * L + e * HB;
-          for (int hh = 0; hh < HB; ++hh) dst[hh] += lane(sum, e * HB + hh);
+          T* dst = dbias_lanes + int64_t(tag[i] + b.rel[e]) * L + e * HB;
+          RANA_UNROLL
+          for (int hh = 0; hh < HB; ++hh) dst[hh] += sum_lanes[e * HB + hh];
         }
         i = e;
       }
