@@ -561,12 +561,74 @@ RANA_HD V load_chunk(const typename Lanes<V>::T* p) {
   }
 }
 
+#if defined(__AVX512F__) && !defined(__CUDACC__)
+// Four vectors of four 128-bit blocks, transposed as a 4 x 4 matrix of blocks: out[i] block j = in[j] block i.
+inline void transpose_blocks4(const __m512* in, __m512* out) {
+  const __m512 t0 = _mm512_shuffle_f32x4(in[0], in[1], 0x44), t1 = _mm512_shuffle_f32x4(in[0], in[1], 0xEE);
+  const __m512 t2 = _mm512_shuffle_f32x4(in[2], in[3], 0x44), t3 = _mm512_shuffle_f32x4(in[2], in[3], 0xEE);
+  out[0] = _mm512_shuffle_f32x4(t0, t2, 0x88);
+  out[1] = _mm512_shuffle_f32x4(t0, t2, 0xDD);
+  out[2] = _mm512_shuffle_f32x4(t1, t3, 0x88);
+  out[3] = _mm512_shuffle_f32x4(t1, t3, 0xDD);
+}
+
+#endif
+
+// Whether the dot products and weighted sums of a block run "by entry" (AVX-512, 16 lanes of 4 entries x 4 heads,
+// rows head-grouped by 4, D a multiple of 4): a streamed row's channels 4g..4g+3 of the 4 heads are then one plain
+// 16-float load, used by all 4 entries, instead of D broadcast-loads per row (see accumulate_rows_by_entry). The
+// block's own operands (q in the forward, ...) are then held per entry: a[4 g + e] lane 4 cl + h = channel 4g + cl of
+// entry e, head h (dot_operand_layout).
+template <typename V, int HB, int D, int G>
+RANA_HD constexpr bool by_entry() {
+#if defined(__AVX512F__) && !defined(__CUDACC__)
+  return Lanes<V>::L == 16 && sizeof(typename Lanes<V>::T) == 4 && HB == 4 && G == 4 && D % 4 == 0;
+#else
+  return false;
+#endif
+}
+
+// Puts D lane vectors (lanes: entry, head) into the layout dot_rows reads (a no-op unless by_entry).
+template <typename V, int HB, int D, int G>
+RANA_HD void dot_operand_layout(V* a) {
+#if defined(__AVX512F__) && !defined(__CUDACC__)
+  if constexpr (by_entry<V, HB, D, G>()) {
+    __m512* m = reinterpret_cast<__m512*>(a);
+    RANA_UNROLL
+    for (int g = 0; g < D / 4; ++g) {
+      __m512 t[4];
+      transpose_blocks4(m + 4 * g, t);
+      RANA_UNROLL
+      for (int e = 0; e < 4; ++e) m[4 * g + e] = t[e];
+    }
+  }
+#else
+  (void)a;
+#endif
+}
+
 // sum_c a[c] * chunk(row + c * H) over D channels, in four independent FMA chains (channel c in chain c % 4): the
 // logit of one key is a dependency chain of D / 4 FMAs plus two adds rather than D / 2 plus one, which the
 // out-of-order core, holding only a few keys' worth of work, could not hide (the logit loops ran at the chains'
-// latency)
-template <typename V, int HB, int D>
+// latency). By entry (by_entry; a in dot_operand_layout): per entry a chain of D / 4 FMAs on plain loads of the row,
+// then the four entries' (channel, head) partial sums transposed into (entry, head) lanes and added.
+template <typename V, int HB, int D, int G>
 RANA_HD V dot_rows(const V* a, const typename Lanes<V>::T* __restrict__ row, int H) {
+#if defined(__AVX512F__) && !defined(__CUDACC__)
+  if constexpr (by_entry<V, HB, D, G>()) {
+    const __m512* m = reinterpret_cast<const __m512*>(a);
+    __m512 p[4] = {_mm512_setzero_ps(), _mm512_setzero_ps(), _mm512_setzero_ps(), _mm512_setzero_ps()}, t[4];
+    RANA_UNROLL
+    for (int g = 0; g < D / 4; ++g) {
+      const __m512 xv = _mm512_loadu_ps(row + 16 * g);
+      RANA_UNROLL
+      for (int e = 0; e < 4; ++e) p[e] = _mm512_fmadd_ps(m[4 * g + e], xv, p[e]);
+    }
+    transpose_blocks4(p, t);
+    const __m512 r = _mm512_add_ps(_mm512_add_ps(t[0], t[1]), _mm512_add_ps(t[2], t[3]));
+    return reinterpret_cast<const V&>(r);
+  }
+#endif
   V s[4] = {splat<V>(0), splat<V>(0), splat<V>(0), splat<V>(0)};
   RANA_UNROLL
   for (int c = 0; c < D; ++c) s[c % 4] += a[c] * load_chunk<V, HB>(row + c * H);
@@ -584,16 +646,6 @@ RANA_HD void axpy_rows(V* acc, V w, const typename Lanes<V>::T* __restrict__ row
 // (heads h0.., layout st). acc lives in memory (keep_in_memory) and is held in registers through the loop. (In two
 // passes of 8 channels, so that AVX2's 16 registers need not spill two of 16 accumulators, it measured no faster.)
 #if defined(__AVX512F__) && !defined(__CUDACC__)
-// Four vectors of four 128-bit blocks, transposed as a 4 x 4 matrix of blocks: out[i] block j = in[j] block i.
-inline void transpose_blocks4(const __m512* in, __m512* out) {
-  const __m512 t0 = _mm512_shuffle_f32x4(in[0], in[1], 0x44), t1 = _mm512_shuffle_f32x4(in[0], in[1], 0xEE);
-  const __m512 t2 = _mm512_shuffle_f32x4(in[2], in[3], 0x44), t3 = _mm512_shuffle_f32x4(in[2], in[3], 0xEE);
-  out[0] = _mm512_shuffle_f32x4(t0, t2, 0x88);
-  out[1] = _mm512_shuffle_f32x4(t0, t2, 0xDD);
-  out[2] = _mm512_shuffle_f32x4(t1, t3, 0x88);
-  out[3] = _mm512_shuffle_f32x4(t1, t3, 0xDD);
-}
-
 // accumulate_rows for 16 lanes of 4 entries x 4 heads over rows head-grouped by 4 (G = 4): a row's channels
 // 4g..4g+3 of the 4 heads are one plain 16-float load, so each step multiplies that load by entry e's weights (its
 // 128-bit block of w, repeated by one shuffle) into accumulators laid out (channel, head) per entry, and a key
@@ -709,7 +761,7 @@ RANA_HD void stream_logits(const Op<typename Lanes<V>::T>& op, const LaneTable<L
         nb = 0;
       }
       RANA_PREFETCH(vt + st.at(j, dv, h0));
-      s[nb] = dot_rows<V, HB, DK>(qr, kt + st.at(j, DK, h0), st.stride()) + bv;
+      s[nb] = dot_rows<V, HB, DK, G>(qr, kt + st.at(j, DK, h0), st.stride()) + bv;
       key[nb++] = j;
     }
   }
@@ -732,6 +784,7 @@ RANA_HD void forward_block(const Op<typename Lanes<V>::T>& op, const Block<Lanes
   const Streamed<G> st{H};
   V qr[DK], acc_mem[DV];
   load_lanes<V, HB, DK>(q, b, h0, op.logit_scale(), qr);
+  dot_operand_layout<V, HB, DK, G>(qr);
   RANA_UNROLL
   for (int c = 0; c < DV; ++c) acc_mem[c] = splat<V>(0);
   keep_in_memory(acc_mem);
@@ -794,6 +847,7 @@ RANA_HD void backward_dq_block(const Op<typename Lanes<V>::T>& op, const Block<L
   const Streamed<G> st{H};
   V qr[DK], acc_mem[DK];
   load_lanes<V, HB, DK>(q, b, h0, op.logit_scale(), qr);
+  dot_operand_layout<V, HB, DK, G>(qr);
   RANA_UNROLL
   for (int c = 0; c < DK; ++c) acc_mem[c] = splat<V>(0);
   keep_in_memory(acc_mem);
@@ -805,8 +859,9 @@ RANA_HD void backward_dq_block(const Op<typename Lanes<V>::T>& op, const Block<L
     {
       V dr[DV];
       load_lanes<V, HB, DV>(dout, b, h0, T(1), dr);
+      dot_operand_layout<V, HB, DV, G>(dr);
       for (int i = 0; i < nb; ++i) {
-        const V dp = dot_rows<V, HB, DV>(dr, vt + st.at(key[i], DV, h0), st.stride());
+        const V dp = dot_rows<V, HB, DV, G>(dr, vt + st.at(key[i], DV, h0), st.stride());
         s[i] = fast_exp2(s[i] - L) * (dp - D);
       }
     }
@@ -851,8 +906,9 @@ RANA_HD void backward_dkdv_block(const Op<typename Lanes<V>::T>& op, const Block
     {
       V vr[DV];
       load_lanes<V, HB, DV>(v, b, h0, T(1), vr);
+      dot_operand_layout<V, HB, DV, G>(vr);
       for (int i = 0; i < nb; ++i) {
-        const V dp = dot_rows<V, HB, DV>(vr, dost + st.at(qid[i], DV, h0), st.stride());
+        const V dp = dot_rows<V, HB, DV, G>(vr, dost + st.at(qid[i], DV, h0), st.stride());
         const V pi = fast_exp2(s[i] - load_chunk<V, HB>(lse_s + qid[i] * H + h0) * T(kLog2e));
         p[i] = pi;
         s[i] = pi * (dp - load_chunk<V, HB>(delta_s + qid[i] * H + h0));
@@ -882,6 +938,7 @@ RANA_HD void backward_dkdv_block(const Op<typename Lanes<V>::T>& op, const Block
   {
     V kr[DK];
     load_lanes<V, HB, DK>(k, b, h0, op.logit_scale(), kr);
+    dot_operand_layout<V, HB, DK, G>(kr);
     int r;
     int32_t x;
     int64_t first, last;
@@ -893,7 +950,7 @@ RANA_HD void backward_dkdv_block(const Op<typename Lanes<V>::T>& op, const Block
           nb = 0;
         }
         RANA_PREFETCH(dost + st.at(i, DV, h0));
-        s[nb] = dot_rows<V, HB, DK>(kr, qst + st.at(i, DK, h0), st.stride()) + bv;
+        s[nb] = dot_rows<V, HB, DK, G>(kr, qst + st.at(i, DK, h0), st.stride()) + bv;
         qid[nb] = i;
         tag[nb++] = r * tw + o - x;
       }
