@@ -719,6 +719,31 @@ RANA_HD void load_lanes(const Operand<typename Lanes<V>::T>& x, const Block<Lane
   for (int c = 0; c < D; ++c) out[c] = load_vector<V>(tmp + c * L);
 }
 
+// load_lanes, then dot_operand_layout. By entry, with a channel-major operand of exactly 4 heads (sH = 1, sC = 4: an
+// entry's channel c of its 4 heads are 4 consecutive scalars), an entry's vectors are plain loads of its row rather
+// than scalars staged through memory and transposed.
+template <typename V, int HB, int D, int G>
+RANA_HD void load_dot_operand(const Operand<typename Lanes<V>::T>& x, const Block<Lanes<V>::L / HB>& b, int h0,
+                              typename Lanes<V>::T mul, V* out) {
+#if defined(__AVX512F__) && !defined(__CUDACC__)
+  if constexpr (by_entry<V, HB, D, G>()) {
+    if (x.sH == 1 && x.sC == HB) {
+      __m512* m = reinterpret_cast<__m512*>(out);
+      const __m512 mv = _mm512_set1_ps(mul);
+      for (int e = 0; e < 4; ++e) {
+        const float* row = x.p + (e < b.n ? b.id[e] * x.sN + h0 : 0);
+        RANA_UNROLL
+        for (int g = 0; g < D / 4; ++g)
+          m[4 * g + e] = e < b.n ? _mm512_mul_ps(_mm512_loadu_ps(row + 16 * g), mv) : _mm512_setzero_ps();
+      }
+      return;
+    }
+  }
+#endif
+  load_lanes<V, HB, D>(x, b, h0, mul, out);
+  dot_operand_layout<V, HB, D, G>(out);
+}
+
 // Writes D lane vectors to the block's rows of x.
 template <typename V, int HB, int D>
 RANA_HD void store_lanes(const V* in, const Block<Lanes<V>::L / HB>& b, int h0,
@@ -783,8 +808,7 @@ RANA_HD void forward_block(const Op<typename Lanes<V>::T>& op, const Block<Lanes
   const int H = op.H;
   const Streamed<G> st{H};
   V qr[DK], acc_mem[DV];
-  load_lanes<V, HB, DK>(q, b, h0, op.logit_scale(), qr);
-  dot_operand_layout<V, HB, DK, G>(qr);
+  load_dot_operand<V, HB, DK, G>(q, b, h0, op.logit_scale(), qr);
   RANA_UNROLL
   for (int c = 0; c < DV; ++c) acc_mem[c] = splat<V>(0);
   keep_in_memory(acc_mem);
@@ -846,8 +870,7 @@ RANA_HD void backward_dq_block(const Op<typename Lanes<V>::T>& op, const Block<L
   const int H = op.H;
   const Streamed<G> st{H};
   V qr[DK], acc_mem[DK];
-  load_lanes<V, HB, DK>(q, b, h0, op.logit_scale(), qr);
-  dot_operand_layout<V, HB, DK, G>(qr);
+  load_dot_operand<V, HB, DK, G>(q, b, h0, op.logit_scale(), qr);
   RANA_UNROLL
   for (int c = 0; c < DK; ++c) acc_mem[c] = splat<V>(0);
   keep_in_memory(acc_mem);
@@ -858,8 +881,7 @@ RANA_HD void backward_dq_block(const Op<typename Lanes<V>::T>& op, const Block<L
   auto flush = [&](int nb) RANA_NOINLINE {  // nb by value (see forward_block)
     {
       V dr[DV];
-      load_lanes<V, HB, DV>(dout, b, h0, T(1), dr);
-      dot_operand_layout<V, HB, DV, G>(dr);
+      load_dot_operand<V, HB, DV, G>(dout, b, h0, T(1), dr);
       for (int i = 0; i < nb; ++i) {
         const V dp = dot_rows<V, HB, DV, G>(dr, vt + st.at(key[i], DV, h0), st.stride());
         s[i] = fast_exp2(s[i] - L) * (dp - D);
@@ -905,8 +927,7 @@ RANA_HD void backward_dkdv_block(const Op<typename Lanes<V>::T>& op, const Block
   auto flush = [&](int nb) RANA_NOINLINE {  // nb by value (see forward_block)
     {
       V vr[DV];
-      load_lanes<V, HB, DV>(v, b, h0, T(1), vr);
-      dot_operand_layout<V, HB, DV, G>(vr);
+      load_dot_operand<V, HB, DV, G>(v, b, h0, T(1), vr);
       for (int i = 0; i < nb; ++i) {
         const V dp = dot_rows<V, HB, DV, G>(vr, dost + st.at(qid[i], DV, h0), st.stride());
         const V pi = fast_exp2(s[i] - load_chunk<V, HB>(lse_s + qid[i] * H + h0) * T(kLog2e));
@@ -937,8 +958,7 @@ RANA_HD void backward_dkdv_block(const Op<typename Lanes<V>::T>& op, const Block
   int nb = 0;
   {
     V kr[DK];
-    load_lanes<V, HB, DK>(k, b, h0, op.logit_scale(), kr);
-    dot_operand_layout<V, HB, DK, G>(kr);
+    load_dot_operand<V, HB, DK, G>(k, b, h0, op.logit_scale(), kr);
     int r;
     int32_t x;
     int64_t first, last;

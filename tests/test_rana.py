@@ -206,7 +206,7 @@ def test_deterministic_across_runs_and_threads():
 
 
 def test_large_outputs_reuse_freed_buffers_only():
-    """Outputs of 32 MiB and more come from the kernels' buffer cache (cuda/rana_cpu_buffers.h): a freed output's
+    """Outputs of 4 MiB and more come from the kernels' buffer cache (cuda/rana_cpu_buffers.h): a freed output's
     buffer is taken by the next call, a live output's never is, and a reused buffer holds exactly the new result."""
     side = 210
     offs = torch.cat([torch.zeros(1, dtype=torch.int64), torch.full((side * side,), 3).cumsum(0)])
