@@ -156,7 +156,8 @@ std::vector<torch::Tensor> rana_backward(torch::Tensor dout, torch::Tensor q, to
   // the kernels read lse and out with the padded heads (and out's padded channels); the dQ pass turns lse into
   // lse_pos (+inf for empty discs and padding heads) and computes delta = dout . out, both for the dK/dV pass
   const auto outp = pad_to(out, pl.H, pl.dv), lse_p = pad_heads(lse, pl.H, -INFINITY);
-  auto lse_pos = rana_cpu_buffers::empty({nq, pl.H}, q.options()), delta = rana_cpu_buffers::empty({nq, pl.H}, q.options());
+  auto lse_pos = rana_cpu_buffers::empty({nq, pl.H}, q.options()),
+       delta = rana_cpu_buffers::empty({nq, pl.H}, q.options());
   const auto cached = [](at::IntArrayRef s, const torch::TensorOptions& o) { return rana_cpu_buffers::empty(s, o); };
   auto dq = empty_like_layout(qp, qp.size(0), pl.H, pl.dk, cached);
   auto dk_t = empty_like_layout(kp, kp.size(0), pl.H, pl.dk, cached);

@@ -22,7 +22,6 @@
 
 #include <algorithm>
 #include <cstdint>
-#include <limits>
 #include <stdexcept>
 #include <type_traits>
 #include <vector>
@@ -36,8 +35,6 @@ using rana::Grid;
 
 constexpr int kBuffer = 256;             // keys (or queries) buffered per softmax step
 constexpr int64_t kBlocksPerChunk = 64;  // key blocks per bias-gradient partial sum
-template <typename T>
-constexpr T neg_inf_v = -std::numeric_limits<T>::infinity();
 using rana::kScalarLaneDim;
 
 // Queries sorted by centre pixel: CSR over the key grid (ptr[p]..ptr[p+1] index into order), ascending query id
@@ -163,7 +160,7 @@ void prepare_rows(const Block<Q>& b, int h0, int H, const Operand<T>& dout, cons
       T s[4] = {T(0), T(0), T(0), T(0)};  // four partial sums: the loop vectorises without reassociating
       for (int c = 0; c < DV; ++c) s[c % 4] += a[c * dout.sC] * o[c * out.sC];
       delta[e] = (s[0] + s[1]) + (s[2] + s[3]);
-      lse_pos[e] = lse[e] == neg_inf_v<T> ? T(INFINITY) : lse[e];
+      lse_pos[e] = lse[e] == rana::neg_inf<T>() ? T(INFINITY) : lse[e];
     }
 }
 

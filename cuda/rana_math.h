@@ -571,7 +571,6 @@ inline void transpose_blocks4(const __m512* in, __m512* out) {
   out[2] = _mm512_shuffle_f32x4(t1, t3, 0x88);
   out[3] = _mm512_shuffle_f32x4(t1, t3, 0xDD);
 }
-
 #endif
 
 // Whether the dot products and weighted sums of a block run "by entry" (AVX-512, 16 lanes of 4 entries x 4 heads,
@@ -642,9 +641,6 @@ RANA_HD void axpy_rows(V* acc, V w, const typename Lanes<V>::T* __restrict__ row
   for (int c = 0; c < D; ++c) acc[c] += w * load_chunk<V, HB>(row + c * H);
 }
 
-// acc[c] += w[i] * chunk(entry idx[i] of x, channel c) for i < nb, c < D: the weighted sum of nb streamed rows
-// (heads h0.., layout st). acc lives in memory (keep_in_memory) and is held in registers through the loop. (In two
-// passes of 8 channels, so that AVX2's 16 registers need not spill two of 16 accumulators, it measured no faster.)
 #if defined(__AVX512F__) && !defined(__CUDACC__)
 // accumulate_rows for 16 lanes of 4 entries x 4 heads over rows head-grouped by 4 (G = 4): a row's channels
 // 4g..4g+3 of the 4 heads are one plain 16-float load, so each step multiplies that load by entry e's weights (its
@@ -675,11 +671,14 @@ inline void accumulate_rows_by_entry(__m512* acc, const __m512* w, int nb, const
 }
 #endif
 
+// acc[c] += w[i] * chunk(entry idx[i] of x, channel c) for i < nb, c < D: the weighted sum of nb streamed rows
+// (heads h0.., layout st). acc lives in memory (keep_in_memory) and is held in registers through the loop. (In two
+// passes of 8 channels, so that AVX2's 16 registers need not spill two of 16 accumulators, it measured no faster.)
 template <typename V, int HB, int D, int G>
 RANA_HD void accumulate_rows(V* acc, const V* w, int nb, const typename Lanes<V>::T* __restrict__ x,
                              const int64_t* idx, const Streamed<G>& st, int h0) {
 #if defined(__AVX512F__) && !defined(__CUDACC__)
-  if constexpr (Lanes<V>::L == 16 && sizeof(typename Lanes<V>::T) == 4 && HB == 4 && G == 4 && D % 4 == 0) {
+  if constexpr (by_entry<V, HB, D, G>()) {
     // st.at(n, D, h0) = n D H + h0 D for G > 0
     accumulate_rows_by_entry<D>(reinterpret_cast<__m512*>(acc), reinterpret_cast<const __m512*>(w), nb, x, idx,
                                 int64_t(D) * st.H, int64_t(h0) * D);
