@@ -77,7 +77,7 @@ QueryOrder order_queries(const torch::Tensor& qpix_t, int64_t Hk, int64_t Wk) {
 // The op's geometry and its mask-and-bias table (kept alive alongside the Op that points into it).
 template <typename T>
 struct OpWithTable {
-  std::vector<T> tab, ptab;
+  std::vector<T> tab, ptab, tab4;
   rana::Op<T> op;
 };
 
@@ -102,6 +102,11 @@ OpWithTable<T> make_op(const Plan& pl, const torch::Tensor& k_offsets, int64_t H
                              t.ptab.data());
     t.op.ptab = t.ptab.data();
     t.op.has_bias = bias.has_value();
+  }
+  if (std::is_same_v<T, float> && !pl.scalar && pl.HB == 4 && rana::Lanes<rana::f32v>::L == 8) {
+    t.tab4.resize(4 * t.tab.size());
+    rana::fill_interleaved_table(rows, t.tab.data(), int(pl.H), t.tab4.data());
+    t.op.tab4 = t.tab4.data();
   }
   return t;
 }
