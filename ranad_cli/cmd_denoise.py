@@ -51,8 +51,8 @@ def parse_bytes(text: str) -> float:
 @click.option("--shard", default=None, metavar="I/N", help="Only farm task I of N (frames I, I+N, ...).")
 @click.option("--strict", is_flag=True, help="Fail on NaN/Inf input samples instead of replacing them.")
 @click.option("--window", type=click.IntRange(1, 7), default=None,
-              help="Frames per window for cross-frame models (default: the model's training window, 3; 1 denoises "
-                   "every frame alone).")
+              help="Frames per window for cross-frame models (default: the window the model was trained with; 1 "
+                   "denoises every frame alone).")
 @click.option("--aovs", default=None, metavar="PATTERN",
               help="Also denoise the AOV layers matching PATTERN (e.g. 'lg_*') in the same files, reusing the "
                    "beauty's kernels (see `ranad aov`).")
@@ -76,7 +76,7 @@ def denoise_cmd(inputs, output, frames, model, device, threads, kind, maps, keep
     from ranad_core.exr.inspect import guess_kind
     from ranad_core.exr.sequence import expand_inputs, format_frame, is_pattern, output_path, shard as take_shard
     from ranad_core.fileutil import check_writable_target
-    from ranad_core.model.store import load_model
+    from ranad_core.model.store import load_model, training_window
     from ranad_core.shot import ShotOptions, denoise_shot, prescan
 
     budget = parse_bytes(max_memory)
@@ -113,7 +113,7 @@ def denoise_cmd(inputs, output, frames, model, device, threads, kind, maps, keep
                f" input; channels: {mapping.mode()}", err=True)
     opts = ShotOptions(model_spec=model, overrides=overrides, tile=tile, halo=halo, max_memory=budget,
                        keep_noisy=keep_noisy, cache_dir=cache_dir, skip_existing=skip_existing, strict=strict,
-                       window=window or 3, aovs=aovs)
+                       window=window or training_window(loaded), aovs=aovs)
     scores = []
 
     def on_frame(job, img, result):

@@ -28,8 +28,9 @@ from .params import int_list
               help="Temporal evaluation instead (datasets made with `ranad synth --ref-frames all`): FLIP and "
                    "temporal error of noisy, OIDN, the single-frame --model and the cross-frame --cross-model.")
 @click.option("--cross-model", default=None, help="Cross-frame model for --temporal (name, file or run).")
-@click.option("--window", default=3, show_default=True, type=click.IntRange(2, 7),
-              help="Frames per window of the cross-frame model in --temporal.")
+@click.option("--window", default=None, type=click.IntRange(2, 7),
+              help="Frames per window of the cross-frame model in --temporal (default: the window it was trained "
+                   "with).")
 def eval_cmd(dataset, out, model, spp, kinds, scenes, grid_pairs, temporal, cross_model, window):
     """Evaluate on DATASET (the output of `ranad synth` with other seeds than the training data): for every
     scene, deep kind and spp, the noisy input, flat OIDN, OIDN then recolour (the studio workflow) and ranad
@@ -71,13 +72,14 @@ def eval_cmd(dataset, out, model, spp, kinds, scenes, grid_pairs, temporal, cros
 def _temporal(dataset, out, loaded, cross_spec, spps, kinds, scenes, window):
     from ranad_core import evaluate as ev
     from ranad_core.fileutil import atomic_output
-    from ranad_core.model.store import load_model
+    from ranad_core.model.store import load_model, training_window
 
     if not cross_spec:
         raise click.UsageError("--temporal needs --cross-model")
     cross = load_model(cross_spec)
     if cross.model.config.window <= 1:
         raise RanadError("not a cross-frame model", cross_spec)
+    window = window or max(2, training_window(cross))
     found = ev.temporal_scenes(dataset)
     if not found:
         raise RanadError("no scene has references on consecutive frames (make it with --ref-frames all)", dataset)

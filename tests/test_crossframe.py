@@ -151,6 +151,30 @@ def test_denoise_with_a_window_caches_every_frame(tmp_path):
     assert len(json.loads(meta["window"])) == 1
 
 
+def test_default_window_is_the_training_window(tmp_path):
+    """Without --window a cross-frame model runs with the window its train_config records (offsets it never
+    saw in training stay unused); files without that record get 3."""
+    from safetensors.torch import save_file
+
+    from ranad_core.model.store import LoadedModel, training_window
+
+    _, cross = small_models()
+    meta = lambda tc: LoadedModel(cross, "m", {"train_config": tc})  # noqa: E731
+    assert training_window(meta(json.dumps({"window": 5}))) == 5
+    assert training_window(meta(json.dumps({"window": 9}))) == cross.config.window   # capped by the architecture
+    assert training_window(meta(json.dumps({}))) == 3
+    assert training_window(LoadedModel(cross, "m", {})) == 3
+    assert training_window(meta("not json")) == 3
+    model = tmp_path / "xf1.safetensors"
+    save_file({k: v.contiguous() for k, v in cross.state_dict().items()}, str(model),
+              metadata={"model_config": json.dumps(cross.config.to_dict()), "train_config": json.dumps({"window": 1})})
+    r = CliRunner().invoke(cli, ["denoise", str(SHOT / "noisy_spp16.####.exr"), "-o", str(tmp_path / "d.####.exr"),
+                                 "--model", str(model), "--cache", str(tmp_path / "c")])
+    assert r.exit_code == 0, r.output
+    _, m = cache_io.read_cache(cache_io.cache_path(str(tmp_path / "c"), str(tmp_path / "d.0001.exr")))
+    assert len(json.loads(m["window"])) == 1
+
+
 def test_temporal_eval_compares_single_and_cross_frame(tmp_path):
     """A shot whose frames 0 and 2 use the noisy frame itself as reference (plumbing; frame 1 has a real one)."""
     import shutil

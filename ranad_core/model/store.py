@@ -40,6 +40,17 @@ class LoadedModel:
     metadata: dict
 
 
+def training_window(loaded: LoadedModel, fallback: int = 3) -> int:
+    """Frames per window a cross-frame model was trained with (its `train_config`): the window `ranad denoise`
+    and `ranad eval --temporal` use unless told otherwise, since the frame ids of wider offsets were never
+    trained. `fallback` for files without that record."""
+    try:
+        window = int(json.loads(loaded.metadata.get("train_config") or "{}").get("window", fallback))
+    except (ValueError, TypeError, AttributeError):
+        return fallback
+    return max(1, min(window, loaded.model.config.window))
+
+
 def shipped_models() -> list[str]:
     return sorted(p.stem for p in WEIGHTS_DIR.glob("*.safetensors"))
 
@@ -78,7 +89,8 @@ def load_model(spec: str | None = None, backend: str = "auto") -> LoadedModel:
         else:
             ckpt = torch.load(path, map_location="cpu", weights_only=False)
             state, config = ckpt["model"], ModelConfig.from_dict(ckpt["model_config"])
-            meta = {"step": str(ckpt.get("step")), "model_config": json.dumps(ckpt["model_config"])}
+            meta = {"step": str(ckpt.get("step")), "model_config": json.dumps(ckpt["model_config"]),
+                    "train_config": json.dumps(ckpt.get("train_config", {}))}
     except RanadError:
         raise
     except Exception as e:  # corrupt or foreign files: one line naming the file
