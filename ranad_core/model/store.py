@@ -89,8 +89,7 @@ def load_model(spec: str | None = None, backend: str = "auto") -> LoadedModel:
         else:
             ckpt = torch.load(path, map_location="cpu", weights_only=False)
             state, config = ckpt["model"], ModelConfig.from_dict(ckpt["model_config"])
-            meta = {"step": str(ckpt.get("step")), "model_config": json.dumps(ckpt["model_config"]),
-                    "train_config": json.dumps(ckpt.get("train_config", {}))}
+            meta = checkpoint_metadata(ckpt)
     except RanadError:
         raise
     except Exception as e:  # corrupt or foreign files: one line naming the file
@@ -110,13 +109,19 @@ def load_model(spec: str | None = None, backend: str = "auto") -> LoadedModel:
     return LoadedModel(model, f"{name}@{_digest(path)}", meta)
 
 
+def checkpoint_metadata(ckpt: dict) -> dict:
+    """The metadata a training checkpoint carries into its exported file (architecture, step, training settings),
+    the same whether the checkpoint is exported or loaded directly."""
+    return {"model_config": json.dumps(ckpt["model_config"]), "step": str(ckpt.get("step")),
+            "train_config": json.dumps(ckpt.get("train_config", {}))}
+
+
 def export_weights(checkpoint: str | Path, out: str | Path, extra: dict | None = None) -> Path:
     """Write a training checkpoint's model weights as safetensors with the config and provenance metadata."""
     from safetensors.torch import save_file
 
     ckpt = torch.load(resolve(str(checkpoint)), map_location="cpu", weights_only=False)
-    meta = {"model_config": json.dumps(ckpt["model_config"]), "step": str(ckpt["step"]),
-            "train_config": json.dumps(ckpt.get("train_config", {}))}
+    meta = checkpoint_metadata(ckpt)
     meta.update({k: str(v) for k, v in (extra or {}).items()})
     state = {k: v.contiguous() for k, v in ckpt["model"].items()}
     with atomic_output(out) as tmp:
