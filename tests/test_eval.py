@@ -78,6 +78,26 @@ def test_recolour_flattens_to_the_given_image_and_keeps_the_layout():
     np.testing.assert_allclose(metrics.flat_rgb(out)[covered], target[covered], rtol=2e-4, atol=1e-5)
 
 
+def test_model_id_names_the_content_not_the_file_bytes(tmp_path):
+    """Exporting one checkpoint twice (safetensors orders metadata keys differently per write) gives one id, the
+    checkpoint's own; another tensor value or another note gives another."""
+    import torch
+    from ranad_core.model.store import content_digest
+
+    run = untrained_run(tmp_path)
+    a = export_weights(run, tmp_path / "a.safetensors")
+    b = export_weights(run, tmp_path / "b.safetensors")
+    ids = {load_model(str(p)).model_id.split("@")[1] for p in (run, a, b)}
+    assert len(ids) == 1
+    assert load_model(str(export_weights(run, tmp_path / "c.safetensors", {"data": "x"}))).model_id.split("@")[1] \
+        not in ids
+    state = {"w": torch.zeros(3), "b": torch.ones(2, dtype=torch.bfloat16)}
+    d = content_digest(state, {"k": "1", "j": "2"})
+    assert d == content_digest(dict(reversed(list(state.items()))), {"j": "2", "k": "1"})
+    assert d != content_digest({**state, "w": torch.tensor([0.0, 0.0, 1e-30])}, {"k": "1", "j": "2"})
+    assert d != content_digest(state, {"k": "1", "j": "3"})
+
+
 def test_weights_round_trip_and_denoise_keeps_the_layout(tmp_path):
     run = untrained_run(tmp_path)
     path = export_weights(run, tmp_path / "m.safetensors", {"data": "test"})

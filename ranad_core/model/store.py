@@ -3,7 +3,9 @@
 A shipped model is `ranad_core/weights/<name>.safetensors` with a model card `<name>.md` beside it. The
 safetensors metadata holds the architecture (`model_config`, JSON) and provenance (training step, data recipe),
 so a file always loads into the architecture it was trained with. A model's id is its name plus the first 12 hex
-digits of the file's SHA-256: caches and eval tables record it, so results name the exact weights.
+digits of a SHA-256 of its content (`content_digest`: the metadata and the tensors, in a canonical order): caches
+and eval tables record it, so results name the exact weights. Not of the file's bytes: safetensors writes the
+metadata keys in a different order in each process, so exporting one checkpoint twice gave two ids.
 """
 
 from __future__ import annotations
@@ -55,8 +57,16 @@ def shipped_models() -> list[str]:
     return sorted(p.stem for p in WEIGHTS_DIR.glob("*.safetensors"))
 
 
-def _digest(path: Path) -> str:
-    return hashlib.sha256(path.read_bytes()).hexdigest()[:12]
+def content_digest(state: dict, metadata: dict) -> str:
+    """First 12 hex digits of the SHA-256 of the metadata (keys sorted) and every tensor (names sorted: name,
+    dtype, shape, bytes): equal for equal weights and provenance, whatever the file's byte layout, so a checkpoint
+    and its export without extra notes share it."""
+    h = hashlib.sha256(json.dumps(metadata, sort_keys=True).encode())
+    for name in sorted(state):
+        t = state[name].detach().cpu().contiguous()
+        h.update(f"\0{name}\0{t.dtype}\0{tuple(t.shape)}\0".encode())
+        h.update(t.reshape(-1).view(torch.uint8).numpy().tobytes())
+    return h.hexdigest()[:12]
 
 
 def resolve(spec: str | None) -> Path:
@@ -106,7 +116,7 @@ def load_model(spec: str | None = None, backend: str = "auto") -> LoadedModel:
         raise RanadError(f"weights do not fit config {config.name!r}: {str(e).splitlines()[0]}", path) from None
     model.eval()
     name = path.stem if path.suffix == ".safetensors" else path.parent.name
-    return LoadedModel(model, f"{name}@{_digest(path)}", meta)
+    return LoadedModel(model, f"{name}@{content_digest(state, meta)}", meta)
 
 
 def checkpoint_metadata(ckpt: dict) -> dict:
