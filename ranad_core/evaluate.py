@@ -223,6 +223,7 @@ def temporal_markdown(rows: list, title: str = "") -> str:
                 agg = {"spp": spp, "method": method, "n": len(sel),
                        **{k: float(np.mean([r[k] for r in sel])) for k in ("flip", "temporal", "seconds")}}
                 lines.append("| " + " | ".join(_fmt(agg[c]) for c in cols) + " |")
+    lines += equivalent_spp_table(rows)
     floors = reference_noise_floor(rows)
     if floors:
         lines += ["", "The references' own noise puts a floor under every temporal error. Estimated from the noisy "
@@ -241,3 +242,54 @@ def reference_noise_floor(rows: list) -> dict:
         if sel:
             out[spp] = float(np.mean([r["temporal"] * np.sqrt(spp / (spp + r["ref_spp"])) for r in sel]))
     return out
+
+
+def _means(rows: list, method: str, key: str) -> dict:
+    """spp -> mean of `key` over the rows of `method`."""
+    return {spp: float(np.mean([r[key] for r in rows if r["spp"] == spp and r["method"] == method]))
+            for spp in sorted({r["spp"] for r in rows if r["method"] == method})}
+
+
+def equivalent_spp(curve: dict, value: float) -> tuple[float | None, str]:
+    """The sample count at which a method with errors `curve` (spp -> error, measured) would score `value`: the
+    first crossing of the piecewise-linear interpolation in log(spp), log(error) between measured points.
+    (spp, "") when found; (None, "<" or ">") when `value` lies above the curve's first point or below all of it
+    (no extrapolation)."""
+    pts = sorted((s, e) for s, e in curve.items() if e > 0)
+    if not pts or value <= 0:
+        return None, ">"
+    if value > pts[0][1]:
+        return None, "<"
+    if value == pts[0][1]:
+        return float(pts[0][0]), ""
+    for (s0, e0), (s1, e1) in zip(pts, pts[1:]):
+        if value == e1:
+            return float(s1), ""
+        if e1 < value < e0:
+            t = (np.log(value) - np.log(e0)) / (np.log(e1) - np.log(e0))
+            return float(np.exp(np.log(s0) + t * (np.log(s1) - np.log(s0)))), ""
+    return None, ">"
+
+
+def equivalent_spp_table(rows: list) -> list:
+    """Markdown lines: for each spp, the single-frame sample count whose FLIP / temporal error the cross-frame
+    model matches (the paper's "cross-frame at N spp matches single-frame at 2-4x N"), interpolated between the
+    single-frame rows; empty with fewer than two single-frame spp."""
+    if len({r["spp"] for r in rows if r["method"] == "ranad"}) < 2:
+        return []
+
+    def cell(curve, value, spp):
+        eq, side = equivalent_spp(curve, value)
+        if eq is None:
+            bound = max(curve) if side == ">" else min(curve)
+            return f"{side} {bound} spp ({side} {bound / spp:.3g}x)"
+        return f"{eq:.3g} spp ({eq / spp:.2f}x)"
+
+    lines = ["", "Cross-frame at N spp against the single-frame model at more samples (log-log interpolation between "
+             "the single-frame rows; no extrapolation):", "",
+             "| spp | ranad-xf's flip = single-frame at | ranad-xf's temporal = single-frame at |", "|---|---|---|"]
+    for spp, xf_flip in _means(rows, "ranad-xf", "flip").items():
+        xf_temporal = _means(rows, "ranad-xf", "temporal")[spp]
+        lines.append(f"| {spp} | {cell(_means(rows, 'ranad', 'flip'), xf_flip, spp)} | "
+                     f"{cell(_means(rows, 'ranad', 'temporal'), xf_temporal, spp)} |")
+    return lines

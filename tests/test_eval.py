@@ -164,3 +164,24 @@ def test_shipped_default_model_denoises_the_example():
     before = metrics.smape(flat_ref, metrics.flat_rgb(noisy))
     after = metrics.smape(flat_ref, metrics.flat_rgb(denoise_frame(loaded.model, noisy).image))
     assert after < 0.7 * before, (before, after)
+
+
+def test_equivalent_spp_interpolates_the_single_frame_curve_in_log_log():
+    """Where the cross-frame model's error falls on the single-frame model's error-vs-spp curve: exact at measured
+    points, log-log linear between them, and a bound rather than an extrapolation outside them."""
+    from ranad_core.evaluate import equivalent_spp, temporal_markdown
+
+    curve = {4: 0.004, 16: 0.002, 64: 0.001}                 # error halves per 4x spp: error ~ spp^-0.5
+    assert equivalent_spp(curve, 0.002) == (16.0, "")
+    eq, _ = equivalent_spp(curve, 0.002 / np.sqrt(2))          # half a step in log: sqrt(16 * 64)
+    assert abs(eq - 32.0) < 1e-9
+    assert equivalent_spp(curve, 0.0005) == (None, ">")
+    assert equivalent_spp(curve, 0.005) == (None, "<")
+    rows = [{"scene": "s", "kind": "deepoid", "spp": spp, "ref_spp": 1024, "method": m, "flip": f, "temporal": t,
+             "seconds": 0.1}
+            for spp, e in curve.items()
+            for m, f, t in (("noisy", 0.5, 0.02), ("ranad", 50 * e, e), ("ranad-xf", 50 * e / np.sqrt(2), e / 2))]
+    table = temporal_markdown(rows)
+    assert "| 4 | 8 spp (2.00x) | 16 spp (4.00x) |" in table
+    assert "| 64 | > 64 spp (> 1x) | > 64 spp (> 1x) |" in table
+    assert "single-frame at" not in temporal_markdown([r for r in rows if r["spp"] == 4])
