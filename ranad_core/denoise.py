@@ -66,8 +66,8 @@ def receptive_field(model) -> int:
     rf = sum(m.radius for m in model.modules() if isinstance(m, MultiHeadRaNA) and not _in_recon(model, m))
     rec = max((sum(d.radius for d in r.down) + max(p.radius for p in r.per_scale) for r in core.recon.values()),
               default=0.0)
-    if is_cross_frame(model):
-        rec += model.config.temporal_radius
+    if is_cross_frame(model):  # the temporal step before the spatial reconstruction, and the output mix after it
+        rec += model.config.temporal_radius * (2 if getattr(model.config, "output_mix", False) else 1)
     return int(math.ceil(rf + rec))
 
 

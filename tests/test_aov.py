@@ -48,7 +48,10 @@ def models():
     cross = CrossFrameRaNAD.from_single(single, get_config("cpu-small-xf"), feature_dim()).eval()
     for g in cross.temporal_gate.values():     # open the temporal step, so the test covers it
         torch.nn.init.constant_(g.bias, 0.0)
-    return single, cross
+    mixed = CrossFrameRaNAD.from_cross(cross, get_config("cpu-small-xfm"), feature_dim()).eval()
+    for g in mixed.mix_gate.values():          # and the output mix
+        torch.nn.init.constant_(g.bias, 0.0)
+    return single, cross, mixed
 
 
 def test_layers_and_rules():
@@ -59,14 +62,13 @@ def test_layers_and_rules():
     assert kernel_rule("lg_key") == "colour"
 
 
-@pytest.mark.parametrize("cross_frame", [False, True])
-def test_light_groups_sum_to_the_denoised_beauty(cross_frame):
-    single, cross = models()
-    model = cross if cross_frame else single
+@pytest.mark.parametrize("kind", ["single", "cross", "output-mix"])
+def test_light_groups_sum_to_the_denoised_beauty(kind):
+    model = dict(zip(("single", "cross", "output-mix"), models()))[kind]
     frames = [exact_groups(read_deep(SHOT / f"noisy_spp16.{i:04d}.exr")) for i in range(3)]
     lg, rgb = sums(frames[1])
     assert np.abs(lg - rgb).max() < 1e-6
-    images, centre = (frames, 1) if cross_frame else ([frames[1]], 0)
+    images, centre = (frames, 1) if kind != "single" else ([frames[1]], 0)
     res = denoise_window(model, images, centre, want_embeddings=True, tile=16)   # tiles: the primary pass
     layers = aov_layers(frames[1].channels, "lg_*")
     out = denoise_aovs(model, images, centre, detect(frames[1]), layers, res.embeddings, res.perms, res.offsets)
@@ -78,7 +80,7 @@ def test_light_groups_sum_to_the_denoised_beauty(cross_frame):
 
 
 def test_aov_command_through_the_cache_and_refusals(tmp_path):
-    single, _ = models()
+    single, *_ = models()
     from safetensors.torch import save_file
 
     model = tmp_path / "m.safetensors"

@@ -7,6 +7,7 @@ import json
 from pathlib import Path
 
 import numpy as np
+import pytest
 import torch
 from click.testing import CliRunner
 
@@ -112,6 +113,35 @@ def test_one_frame_window_is_the_single_frame_model():
     c = denoise_window(cross, frames, 1).image
     np.testing.assert_array_equal(c.offsets, frames[1].offsets)
     assert not np.array_equal(c.values, b.values)            # the neighbours do change the result
+
+
+def test_output_mix_starts_from_a_cross_frame_model_and_keeps_the_rules():
+    """cpu-small-xfm from a cpu-small-xf model: with its gates shut it is that model; with one frame it is the
+    single-frame model; opened, it changes the result, tiles still equal the whole frame (its step is inside the
+    halo), and gradients reach it."""
+    single, cross = small_models()
+    mixed = CrossFrameRaNAD.from_cross(cross, get_config("cpu-small-xfm"), feature_dim()).eval()
+    frames = [read_deep(SHOT / f"noisy_spp16.{i:04d}.exr") for i in range(3)]
+    for g in mixed.mix_gate.values():
+        torch.nn.init.constant_(g.bias, -1e4)
+    np.testing.assert_array_equal(denoise_window(mixed, frames, 1).image.values,
+                                  denoise_window(cross, frames, 1).image.values)
+    np.testing.assert_array_equal(denoise_window(mixed, frames[1:2], 0).image.values,
+                                  denoise_window(single, frames[1:2], 0).image.values)
+    assert receptive_field(mixed) > receptive_field(cross)
+    for g in mixed.mix_gate.values():
+        torch.nn.init.constant_(g.bias, 0.0)
+    whole = denoise_window(mixed, frames, 1).image.values
+    assert np.abs(whole - denoise_window(cross, frames, 1).image.values).max() > 1e-3
+    np.testing.assert_allclose(denoise_window(mixed, frames, 1, tile=16).image.values, whole, rtol=1e-4, atol=1e-5)
+    mixed.train()
+    window = [prepare(f.sorted()[0]) for f in compensate([f.crop((0, 0, 23, 23)) for f in frames], 1)[0]]
+    sum(v.square().mean() for v in mixed(window, 1).values()).backward()
+    for name in ("mix.diffuse.q.weight", "mix_gate.diffuse.bias", "temporal.diffuse.k.weight"):
+        g = dict(mixed.named_parameters())[name].grad
+        assert g is not None and g.abs().max() > 0, name
+    with pytest.raises(ValueError):                          # a model of another backbone does not fit
+        CrossFrameRaNAD.from_cross(single, get_config("cpu-small-xfm"), feature_dim())
 
 
 def test_gradients_reach_the_temporal_modules():

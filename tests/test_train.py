@@ -215,3 +215,24 @@ def test_train_with_the_temporal_loss(tmp_path):
     assert r.exit_code == 2 and "--ref-frames all" in r.output
     r = CliRunner().invoke(cli, ["train", str(ds), "-o", str(tmp_path / "r3"), "--temporal-weight", "2"])
     assert r.exit_code == 2 and "cross-frame config" in r.output
+
+
+def test_output_mix_config_starts_from_a_cross_frame_run(tmp_path):
+    """--init with a cross-frame run starts cpu-small-xfm from its weights (the output mix added, nearly shut);
+    a config without the output mix refuses such an --init."""
+    from ranad_core.model.store import load_model
+
+    ds = sequence_dataset(tmp_path / "ds")
+    base = tmp_path / "xf"
+    args = ["--steps", "1", "--crop", "16", "--temporal-weight", "2"]
+    r = CliRunner().invoke(cli, ["train", str(ds), "-o", str(base), "--config", "cpu-small-xf", *args])
+    assert r.exit_code == 0, r.output
+    r = CliRunner().invoke(cli, ["train", str(ds), "-o", str(tmp_path / "xfm"), "--config", "cpu-small-xfm",
+                                 "--init", str(base), "--lr", "0", *args])
+    assert r.exit_code == 0, r.output
+    before, after = load_model(str(base)).model.state_dict(), load_model(str(tmp_path / "xfm")).model.state_dict()
+    assert set(after) - set(before) and all(k.startswith(("mix.", "mix_gate.")) for k in set(after) - set(before))
+    assert all(torch.equal(before[k], after[k]) for k in before)        # lr 0: the copied weights, untouched
+    r = CliRunner().invoke(cli, ["train", str(ds), "-o", str(tmp_path / "bad"), "--config", "cpu-small-xf",
+                                 "--init", str(base), *args])
+    assert r.exit_code == 2 and "output mix" in r.output

@@ -32,6 +32,7 @@ class ModelConfig:
     recon: dict = field(default_factory=dict)  # output layer -> ReconConfig (diffuse, specular, alpha, depth)
     window: int = 1              # frames the model sees (1: single-frame; >1: cross-frame, up to this many)
     temporal_radius: float = 1.0  # radius of the T-Mix blocks and the temporal reconstruction step
+    output_mix: bool = False      # cross-frame: a temporal step over the window's spatially denoised frames at the end
 
     def to_dict(self) -> dict:
         d = asdict(self)
@@ -64,6 +65,9 @@ CONFIGS = {
 
 CONFIGS["cpu-small-xf"] = ModelConfig(**{**CONFIGS["cpu-small"].__dict__, "name": "cpu-small-xf", "window": 7,
                                         "temporal_radius": 1.0})
+# cpu-small-xf plus the output mix (crossframe.py): every frame of the window reconstructed, then mixed in time
+CONFIGS["cpu-small-xfm"] = ModelConfig(**{**CONFIGS["cpu-small-xf"].__dict__, "name": "cpu-small-xfm",
+                                         "output_mix": True})
 
 
 def get_config(name: str) -> ModelConfig:

@@ -8,6 +8,11 @@
 - Reconstruction: a temporal step (the centre frame's bins attend over the window's bins with the noisy values
   as values, a kernel like every other: linear in the noisy values), then the single-frame spatial multi-scale
   reconstruction on the centre frame.
+- Output mix (configs with `output_mix`, not in the paper): every other frame of the window is reconstructed
+  spatially too, and a last temporal kernel step mixes the centre's result with them, gated per bin. Consecutive
+  centre frames then share most of what their outputs are averaged from, denoised, rather than only noisy inputs
+  that the spatial kernels weigh differently in each window: this targets flicker directly. Still a kernel over
+  noisy values (linear in them), so AOVs reuse it.
 
 A window of one frame skips the T-Mix blocks and the temporal step, so a cross-frame model with one frame is the
 single-frame model it was initialised from (`from_single`): the new one-hot inputs start with zero weights and
@@ -33,7 +38,7 @@ FRAME_FEATURES = 2 * MAX_OFFSET + 1
 # output projections at zero, the temporal gate nearly closed. AdamW moves a parameter by about the learning
 # rate per step whatever its gradient, so at the base rate a gate logit starting at -4 hardly moves
 # (cpu-small-xf-v1's first 2500 steps moved it by at most 0.06) and the model stays the single-frame one.
-LR_SCALE = {"temporal_gate.": 10.0, "tmix.": 3.0, "temporal.": 3.0}
+LR_SCALE = {"temporal_gate.": 10.0, "tmix.": 3.0, "temporal.": 3.0, "mix_gate.": 10.0, "mix.": 3.0}
 
 
 def temporal_layout(layouts: list) -> tuple[Layout, torch.Tensor]:
@@ -79,7 +84,11 @@ class CrossFrameRaNAD(nn.Module):
         # per-bin share of the temporal result (a function of the features only, so the output stays linear in
         # the values); starts near 0: training begins from the single-frame behaviour
         self.temporal_gate = nn.ModuleDict({name: nn.Linear(c.dim, 1) for name in c.recon})
-        for g in self.temporal_gate.values():
+        if c.output_mix:
+            self.mix = nn.ModuleDict({name: KernelAttention(c.dim, r.heads, r.head_dim, c.temporal_radius, backend)
+                                      for name, r in c.recon.items()})
+            self.mix_gate = nn.ModuleDict({name: nn.Linear(c.dim, 1) for name in c.recon})
+        for g in [*self.temporal_gate.values(), *(self.mix_gate.values() if c.output_mix else ())]:
             nn.init.zeros_(g.weight)
             nn.init.constant_(g.bias, -4.0)
 
@@ -91,6 +100,18 @@ class CrossFrameRaNAD(nn.Module):
         w = state["embed.0.weight"]
         state["embed.0.weight"] = torch.cat([w, w.new_zeros(w.shape[0], FRAME_FEATURES)], 1)
         model.single.load_state_dict(state)
+        return model
+
+    @classmethod
+    def from_cross(cls, other: "CrossFrameRaNAD", config: ModelConfig, in_dim: int) -> "CrossFrameRaNAD":
+        """A cross-frame model for `config` that starts as `other` (a cross-frame model of the same backbone
+        without the output mix): its weights copied, the output mix's gates nearly closed."""
+        model = cls(config, in_dim)
+        missing, unexpected = model.load_state_dict(other.state_dict(), strict=False)
+        extra = [k for k in missing if not k.startswith(("mix.", "mix_gate."))]
+        if extra or unexpected:
+            raise ValueError(f"weights do not fit config {config.name!r}: missing {extra[:3]}, unexpected "
+                             f"{unexpected[:3]}")
         return model
 
     def lr_scale(self, name: str) -> float:
@@ -126,6 +147,12 @@ class CrossFrameRaNAD(nn.Module):
                 g = torch.sigmoid(self.temporal_gate[name](feats[centre]))
                 v = v + g * (t - v)
             out[name] = rec(feats[centre], c.layout, v)
+            if self.config.output_mix and len(frames) > 1:
+                spatial = [out[name] if i == centre else rec(feats[i], f.layout, vals[i])
+                           for i, f in enumerate(frames)]
+                m = self.mix[name](feats[centre], allf, c.layout.pixels, keys, torch.cat(spatial)[gather])
+                g = torch.sigmoid(self.mix_gate[name](feats[centre]))
+                out[name] = out[name] + g * (m - out[name])
         return out
 
     def forward(self, frames: list, centre: int) -> dict:

@@ -104,8 +104,9 @@ def save_checkpoint(path: str, model, opt, step: int, cfg: TrainConfig, rng: np.
 
 
 def build_model(cfg: TrainConfig, config):
-    """A fresh model for `config`: single-frame, or cross-frame (started from `cfg.init`'s single-frame weights
-    when given, so training begins from a working denoiser)."""
+    """A fresh model for `config`: single-frame, or cross-frame (started from `cfg.init`'s weights when given, so
+    training begins from a working denoiser: a single-frame model's, or a cross-frame model's without the output
+    mix for a config with it)."""
     if config.window <= 1:
         return RaNAD(config, feature_dim())
     from ..model.crossframe import CrossFrameRaNAD
@@ -113,10 +114,18 @@ def build_model(cfg: TrainConfig, config):
     if cfg.init:
         from ..model.store import load_model
 
-        single = load_model(cfg.init).model
-        if single.config.dim != config.dim or single.config.unets != config.unets:
-            raise RanadError(f"--init model {single.config.name!r} does not match config {config.name!r}", cfg.init)
-        return CrossFrameRaNAD.from_single(single, config, feature_dim()).train()
+        init = load_model(cfg.init).model
+        if init.config.dim != config.dim or init.config.unets != config.unets:
+            raise RanadError(f"--init model {init.config.name!r} does not match config {config.name!r}", cfg.init)
+        if init.config.window > 1:
+            if init.config.output_mix or not config.output_mix:
+                raise RanadError(f"--init: a cross-frame model starts only a config with the output mix (such as "
+                                 f"cpu-small-xfm), not {config.name!r}", cfg.init)
+            try:
+                return CrossFrameRaNAD.from_cross(init, config, feature_dim()).train()
+            except ValueError as e:
+                raise RanadError(f"--init: {e}", cfg.init) from None
+        return CrossFrameRaNAD.from_single(init, config, feature_dim()).train()
     return CrossFrameRaNAD(config, feature_dim())
 
 
