@@ -29,7 +29,10 @@ from .params import int_list as _int_list
               help="Scenes rendered in parallel (processes; the cores are shared out between them).")
 @click.option("--ref-frames", type=click.Choice(["centre", "all"]), default="centre", show_default=True,
               help="Frames that get a reference: the centre frame (training) or all (temporal evaluation).")
-def synth_cmd(out, scenes, size, frames, spp, ref_spp, seed, presets, kinds, workers, ref_frames):
+@click.option("--motion", default=1.0, show_default=True, type=click.FloatRange(0),
+              help="Scale of every per-frame movement (camera, objects, spins): 0.5 renders the same shots at twice "
+                   "the frame rate, 0 holds them still.")
+def synth_cmd(out, scenes, size, frames, spp, ref_spp, seed, presets, kinds, workers, ref_frames, motion):
     """Render SCENES procedural animated scenes: every frame at each noisy spp, and the centre frame's
     reference binned into each noisy image's bins, as deep-Z and deep-OID EXRs with a manifest per scene.
 
@@ -43,7 +46,8 @@ def synth_cmd(out, scenes, size, frames, spp, ref_spp, seed, presets, kinds, wor
     mitsuba()  # fail early, with the install hint, before any folder is made
     cfg = dataset.SynthConfig(out=out, scenes=scenes, size=size, frames=frames, spp=_int_list(spp), ref_spp=ref_spp,
                               seed=seed, presets=tuple(presets) or PRESETS,
-                              kinds=tuple(kinds) or ("deepz", "deepoid"), ref_frames=ref_frames)
+                              kinds=tuple(kinds) or ("deepz", "deepoid"), ref_frames=ref_frames,
+                              motion=motion)
     skipped = sum(dataset.is_done(cfg, i) for i in range(scenes))
     try:
         with tqdm(total=scenes - skipped, desc="synth", unit="scene", disable=scenes - skipped <= 1) as bar:

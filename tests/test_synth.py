@@ -120,6 +120,22 @@ def test_motion_vectors_land_on_same_object(small_dataset):
         assert landed >= 0.95 * moving, (landed, moving)
 
 
+def test_motion_scale_is_the_same_shot_at_another_frame_rate():
+    """--motion 0.5: frame offset 2k is frame offset k of the unscaled shot (same draws, half the step)."""
+    half, full = make_scene(11, "medium", 32, 5, motion=0.5), make_scene(11, "medium", 32, 3)
+    assert len(half.objects) == len(full.objects)
+    for a, b in zip(half.objects, full.objects):
+        for k in (-1, 0, 1):
+            np.testing.assert_allclose(a.transforms[2 + 2 * k], b.transforms[1 + k], atol=1e-9)
+    np.testing.assert_allclose(half.camera.origin[0], full.camera.origin[0], atol=1e-12)
+    moving = [o for o in full.objects if not np.allclose(o.transforms[0], o.transforms[-1])]
+    assert moving, "the unscaled shot should move"
+    still = make_scene(11, "medium", 32, 3, motion=0.0)
+    assert all(np.allclose(o.transforms[0], o.transforms[-1]) for o in still.objects)
+    with pytest.raises(ValueError, match="motion"):
+        make_scene(11, "medium", 32, 3, motion=-1.0)
+
+
 def test_same_seed_same_files(small_dataset, tmp_path):
     """Same seed, same bytes; references of every frame (--ref-frames all) leave the centre one unchanged."""
     cfg = small_dataset
@@ -147,10 +163,12 @@ def test_cli_synth_writes_a_resumable_dataset(tmp_path):
 
     out = tmp_path / "ds"
     args = ["synth", "-o", str(out), "--scenes", "1", "--size", "16", "--frames", "2", "--spp", "2",
-            "--ref-spp", "8", "--preset", "easy", "--kind", "deepoid"]
+            "--ref-spp", "8", "--preset", "easy", "--kind", "deepoid", "--motion", "0.5"]
     r = CliRunner().invoke(cli, args)
     assert r.exit_code == 0, r.output
-    assert (out / "scene_0000" / "manifest.json").is_file()
+    import json
+
+    assert json.loads((out / "scene_0000" / "manifest.json").read_text())["motion"] == 0.5
     assert (out / "scene_0000" / "deepoid" / "noisy_spp2.0001.exr").is_file()
     assert not (out / "scene_0000" / "deepz").exists()
     again = CliRunner().invoke(cli, args)

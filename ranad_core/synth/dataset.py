@@ -38,6 +38,7 @@ class SynthConfig:
     presets: tuple = PRESETS
     kinds: tuple = ("deepz", "deepoid")
     ref_frames: str = "centre"        # "centre", or "all" (references for every frame: temporal evaluation)
+    motion: float = 1.0               # per-frame motion scale (scene.make_scene): 0.5 = twice the frame rate
 
 
 def scene_seed(seed: int, index: int) -> int:
@@ -75,7 +76,7 @@ def make_one(cfg: SynthConfig, index: int) -> dict:
     t0 = time.perf_counter()
     sseed = scene_seed(cfg.seed, index)
     preset = cfg.presets[index % len(cfg.presets)]
-    spec = make_scene(sseed, preset, cfg.size, cfg.frames)
+    spec = make_scene(sseed, preset, cfg.size, cfg.frames, cfg.motion)
     centre = cfg.frames // 2
     root = scene_dir(cfg, index)
     files, stats = [], {}
@@ -112,7 +113,8 @@ def make_one(cfg: SynthConfig, index: int) -> dict:
     for kind_name in cfg.kinds:
         stats[kind_name]["bins_per_covered_pixel"] = float(np.mean(bins_per_px[kind_name]))
     manifest = {"scene": index, "seed": sseed, "preset": preset, "size": cfg.size, "frames": cfg.frames,
-                "centre_frame": centre, "reference_frames": ref_frames, "spp": list(cfg.spp), "ref_spp": cfg.ref_spp,
+                "motion": cfg.motion, "centre_frame": centre, "reference_frames": ref_frames, "spp": list(cfg.spp),
+                "ref_spp": cfg.ref_spp,
                 "light_groups": spec.light_groups, "objects": len(spec.objects), "files": files, "stats": stats,
                 "seconds": round(time.perf_counter() - t0, 2)}
     with atomic_output(os.path.join(root, "manifest.json")) as tmp:
