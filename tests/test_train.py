@@ -236,3 +236,18 @@ def test_output_mix_config_starts_from_a_cross_frame_run(tmp_path):
     r = CliRunner().invoke(cli, ["train", str(ds), "-o", str(tmp_path / "bad"), "--config", "cpu-small-xf",
                                  "--init", str(base), *args])
     assert r.exit_code == 2 and "output mix" in r.output
+
+
+def test_training_pools_several_datasets(tmp_path):
+    """`ranad train A B`: the scenes of both datasets (same scene names in each) are pooled, not merged by name."""
+    a, b = sequence_dataset(tmp_path / "a"), sequence_dataset(tmp_path / "b")
+    assert len(find_pairs([a, b])) == 2 * len(find_pairs(a))
+    assert len(find_frame_pairs((a, b))) == 2 * len(find_frame_pairs(a))
+    assert {p.noisy.parents[2] for p in find_pairs([a, b])} == {a, b}
+    run = tmp_path / "run"
+    r = CliRunner().invoke(cli, ["train", str(a), str(b), "-o", str(run), "--config", "cpu-small-xf", "--steps", "1",
+                                 "--crop", "16", "--temporal-weight", "1"])
+    assert r.exit_code == 0, r.output
+    assert torch.load(run / "checkpoint.pt", weights_only=False)["train_config"]["dataset"] == (str(a), str(b))
+    r = CliRunner().invoke(cli, ["train", str(a), str(tmp_path / "none"), "-o", str(tmp_path / "r2")])
+    assert r.exit_code == 2 and "dataset folder not found" in r.output and "none" in r.output

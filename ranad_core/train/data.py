@@ -35,29 +35,42 @@ def complete(*pairs: Pair) -> bool:
     return all(p.noisy.is_file() and p.reference.is_file() for p in pairs)
 
 
-def find_pairs(root: str | Path) -> list:
-    """Every (noisy, reference) pair of the centre frames of a dataset's complete scenes."""
-    root = Path(root)
-    if not root.is_dir():
-        raise RanadError("dataset folder not found", root)
+def dataset_roots(roots) -> list:
+    """One dataset folder or several (a path, or a list/tuple of them), as Paths in the order given."""
+    return [Path(r) for r in ([roots] if isinstance(roots, (str, Path)) else roots)]
+
+
+def manifests(roots) -> list:
+    """The scene manifests of one or several datasets (scenes of each dataset in order, datasets in turn)."""
+    return [m for root in dataset_roots(roots) for m in sorted(root.glob("scene_*/manifest.json"))]
+
+
+def find_pairs(roots) -> list:
+    """Every (noisy, reference) pair of the centre frames of the complete scenes of one or several datasets."""
+    for root in dataset_roots(roots):
+        if not root.is_dir():
+            raise RanadError("dataset folder not found", root)
     pairs = []
-    for manifest in sorted(root.glob("scene_*/manifest.json")):
-        m = json.loads(manifest.read_text())
-        for kind in ("deepz", "deepoid"):
-            for spp in m["spp"]:
-                pair = pair_at(manifest.parent, kind, spp, m["centre_frame"])
-                if complete(pair):
-                    pairs.append(pair)
-    if not pairs:
-        raise RanadError("no complete scenes (scene_*/manifest.json with noisy and reference files)", root)
+    for root in dataset_roots(roots):
+        found = []
+        for manifest in sorted(root.glob("scene_*/manifest.json")):
+            m = json.loads(manifest.read_text())
+            for kind in ("deepz", "deepoid"):
+                for spp in m["spp"]:
+                    pair = pair_at(manifest.parent, kind, spp, m["centre_frame"])
+                    if complete(pair):
+                        found.append(pair)
+        if not found:
+            raise RanadError("no complete scenes (scene_*/manifest.json with noisy and reference files)", root)
+        pairs += found
     return pairs
 
 
-def find_frame_pairs(root: str | Path) -> list:
+def find_frame_pairs(roots) -> list:
     """(pair of frame t, pair of frame t + 1) for every two consecutive frames with references: the inputs of
     the temporal loss. Empty for datasets with the centre frame's reference only."""
     out = []
-    for manifest in sorted(Path(root).glob("scene_*/manifest.json")):
+    for manifest in manifests(roots):
         m = json.loads(manifest.read_text())
         refs = set(m.get("reference_frames", [m["centre_frame"]]))
         for kind in ("deepz", "deepoid"):

@@ -28,7 +28,7 @@ CHECKPOINT = "checkpoint.pt"
 
 @dataclass
 class TrainConfig:
-    dataset: str
+    dataset: str | tuple          # a `ranad synth` folder, or several (their scenes pooled)
     run: str
     config: str = "cpu-small"
     steps: int = 2000
