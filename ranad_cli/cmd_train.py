@@ -38,8 +38,8 @@ from tqdm import tqdm
 def train_cmd(datasets, run, config, steps, crop, lr, seed, checkpoint_every, processes, p_no_aux, p_no_split, window,
               init, temporal_weight, until):
     """Train on DATASETS (one or several outputs of `ranad synth`, their scenes pooled): centre-frame pairs,
-    random crops, flips and transposes, SMAPE on the diffuse and specular bins and on the composited colour plus SSIM on it, L1 on alpha and depth.
-    Resumes from RUN/checkpoint.pt when it exists."""
+    random crops, flips and transposes, SMAPE on the diffuse and specular bins and on the composited colour plus
+    SSIM on it, L1 on alpha and depth. Resumes from RUN/checkpoint.pt when it exists."""
     from ranad_core.model import get_config
     from ranad_core.train.trainer import TrainConfig, resume_step, spawn_local, train
 
@@ -47,7 +47,8 @@ def train_cmd(datasets, run, config, steps, crop, lr, seed, checkpoint_every, pr
         get_config(config)
     except ValueError as e:
         raise click.BadParameter(str(e), param_hint="--config") from None
-    cfg = TrainConfig(dataset=datasets[0] if len(datasets) == 1 else tuple(datasets), run=run, config=config, steps=steps, crop=crop, lr=lr, seed=seed,
+    cfg = TrainConfig(dataset=datasets[0] if len(datasets) == 1 else tuple(datasets), run=run, config=config,
+                      steps=steps, crop=crop, lr=lr, seed=seed,
                       checkpoint_every=checkpoint_every, p_no_aux=p_no_aux, p_no_split=p_no_split,
                       window=window, init=init, temporal_weight=temporal_weight, until=until)
     if processes > 1:

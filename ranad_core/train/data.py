@@ -53,7 +53,7 @@ def find_pairs(roots) -> list:
     pairs = []
     for root in dataset_roots(roots):
         found = []
-        for manifest in sorted(root.glob("scene_*/manifest.json")):
+        for manifest in manifests(root):
             m = json.loads(manifest.read_text())
             for kind in ("deepz", "deepoid"):
                 for spp in m["spp"]:

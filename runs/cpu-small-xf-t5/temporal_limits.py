@@ -22,7 +22,6 @@ scaling, and the sweep's settings are fixed below (not tuned on DATASET).
 from __future__ import annotations
 
 import argparse
-import json
 from pathlib import Path
 
 import numpy as np
@@ -31,6 +30,7 @@ import torch
 from ranad_core import metrics
 from ranad_core.deep import DeepImage
 from ranad_core.denoise import denoise_window
+from ranad_core.evaluate import temporal_scenes
 from ranad_core.exr import read_deep
 from ranad_core.exr.sequence import Frame
 from ranad_core.model.crossframe import temporal_layout
@@ -40,10 +40,6 @@ from ranad_core.shot import window_of
 
 SINGLE, CROSS, WINDOW, SPPS = "cpu-small-v1", "cpu-small-xf-v2", 5, (4, 16)
 SWEEP = [dict(s1=1, s2=1), dict(s1=2, s2=3), dict(s1=3, s2=8), dict(s1=3, s2=8, gate=0.9), dict(sym=True)]
-
-
-def scenes(dataset: Path) -> list:
-    return sorted(p.parent for p in dataset.glob("scene_*/manifest.json"))
 
 
 def frame_path(scene: Path, what: str, spp: int, f: int) -> str:
@@ -80,10 +76,11 @@ class Reweighted:
                     per_frame = torch.cat([(allv[:, :, None] * oh[:, None, :]).reshape(-1, ch * n), oh], 1)
                     y = m.temporal[name](feats[centre], allf, c.layout.pixels, keys, per_frame)
                     sums, mass = y[:, :ch * n].reshape(-1, ch, n), y[:, ch * n:]
-                    s = torch.tensor([self.scale.get(abs(i - centre), 1.0) for i in range(n)])
-                    w = mass * s / (mass * s).sum(-1, keepdim=True).clamp_min(1e-12)
                     if self.sym:
                         w = symmetric(mass, centre)
+                    else:
+                        s = torch.tensor([self.scale.get(abs(i - centre), 1.0) for i in range(n)])
+                        w = mass * s / (mass * s).sum(-1, keepdim=True).clamp_min(1e-12)
                     t = (sums / mass.clamp_min(1e-12)[:, None, :] * w[:, None, :]).sum(-1)
                     if self.gate is not None:
                         g = g.clamp_min(self.gate)
@@ -125,8 +122,8 @@ def run_shots(cross, data: dict) -> dict:
 
 def load_shots(dataset: Path) -> dict:
     data = {}
-    for sc in scenes(dataset):
-        n = json.loads((sc / "manifest.json").read_text())["frames"]
+    for sc, m in temporal_scenes(str(dataset)):
+        n = m["frames"]
         for spp in SPPS:
             seq = [Frame(frame_path(sc, "noisy", spp, f), f) for f in range(n)]
             data[sc.name, spp] = (seq, [read_deep(f.path) for f in seq],
@@ -139,34 +136,37 @@ def weights_and_sweep(dataset: Path, what: set) -> None:
     original = cross.reconstruct
     data = load_shots(dataset)
     print(f"### {CROSS} on {dataset.name}: the temporal step (window {WINDOW}, deep-OID)\n")
-    if "weights" in what:
-        rw = Reweighted(cross)
+    # the sweep's first setting is the model as trained: one pass records the weights and scores that row
+    sweep = SWEEP if "reweight" in what else SWEEP[:1]
+    rows = []
+    for cfg in sweep:
+        rw = Reweighted(cross, **cfg)
         cross.reconstruct = rw
-        base = run_shots(cross, data)
-        print("Mean weight per frame offset of the centre bins (full windows only; gate included):\n")
-        print("| layer | -2 | -1 | 0 | +1 | +2 | effective frames (1 / sum w^2), median |\n|---|---|---|---|---|---|---|")
-        for name, w in rw.weights.items():
-            w = np.concatenate(w)
-            print(f"| {name} | " + " | ".join(f"{x:.3f}" for x in w.mean(0)) +
-                  f" | {np.median(1 / (w ** 2).sum(1)):.2f} |")
-        print()
+        rows.append((cfg, run_shots(cross, data)))
+        if cfg is SWEEP[0] and "weights" in what:
+            print("Mean weight per frame offset of the centre bins (full windows only; gate included):\n")
+            print("| layer | -2 | -1 | 0 | +1 | +2 | effective frames (1 / sum w^2), median |\n"
+                  "|---|---|---|---|---|---|---|")
+            for name, w in rw.weights.items():
+                w = np.concatenate(w)
+                print(f"| {name} | " + " | ".join(f"{x:.3f}" for x in w.mean(0)) +
+                      f" | {np.median(1 / (w ** 2).sum(1)):.2f} |")
+            print()
+    cross.reconstruct = original
     if "reweight" in what:
         single = {}
         for (_, spp), (seq, imgs, refs) in data.items():
             outs = [metrics.flat_rgb(denoise_window(load_single(), [im], 0).image) for im in imgs]
             single.setdefault(spp, []).append(metrics.temporal_error(outs, refs))
-        print("Test-time scaling of the mass on frames +-1 (s1) and +-2 (s2) (sym: each pair cut to its symmetric part), "
-              "colour layers; temporal error as a "
-              "ratio to the single-frame model's:\n")
+        print("Test-time scaling of the mass on frames +-1 (s1) and +-2 (s2) (sym: each pair cut to its symmetric "
+              "part), colour layers; temporal error as a ratio to the single-frame model's:\n")
         print("| s1 | s2 | gate | spp | FLIP | temporal | / single-frame |\n|---|---|---|---|---|---|---|")
-        for cfg in SWEEP:
-            cross.reconstruct = Reweighted(cross, **cfg)
-            for spp, (fl, te) in run_shots(cross, data).items():
+        for cfg, scores in rows:
+            for spp, (fl, te) in scores.items():
                 scaling = "sym | sym" if cfg.get("sym") else f"{cfg['s1']} | {cfg['s2']}"
                 print(f"| {scaling} | {'>= %g' % cfg['gate'] if 'gate' in cfg else 'learned'} | "
                       f"{spp} | {fl:.4f} | {te:.6f} | {te / np.mean(single[spp]):.3f} |")
         print()
-    cross.reconstruct = original
 
 
 _single = None
@@ -192,8 +192,8 @@ def reference_change(dataset: Path) -> None:
     """Per opaque bin present in all five frames around each shot's centre: |neighbour - centre| of the
     compensated references, and the single-frame model's |denoised - reference| on the same bins."""
     acc = {}
-    for sc in scenes(dataset):
-        centre = json.loads((sc / "manifest.json").read_text())["centre_frame"]
+    for sc, m in temporal_scenes(str(dataset)):
+        centre = m["centre_frame"]
         for spp in SPPS:
             fr = range(centre - 2, centre + 3)
             noisy = [read_deep(frame_path(sc, "noisy", spp, f)) for f in fr]
