@@ -8,6 +8,7 @@ import click
 from tqdm import tqdm
 
 from ranad_core.errors import RanadError
+from ranad_core.synth.scene import FAMILIES
 
 from .params import int_list as _int_list
 
@@ -21,8 +22,10 @@ from .params import int_list as _int_list
 @click.option("--spp", default="4,16,64", show_default=True, help="Noisy sample counts, comma-separated.")
 @click.option("--ref-spp", default=1024, show_default=True, type=click.IntRange(1), help="Reference samples.")
 @click.option("--seed", default=0, show_default=True, type=int, help="Dataset seed: same seed, same files.")
-@click.option("--preset", "presets", multiple=True, type=click.Choice(["easy", "medium", "deep-heavy"]),
-              help="Scene presets, used in turn (default: all three).")
+@click.option("--preset", "presets", multiple=True, type=click.Choice(list(FAMILIES)),
+              help="Scene presets/families, used in turn (default: easy, medium, deep-heavy). The families "
+                   "studio, glass, thin, layers and textured randomise materials (glass, metals, textures), "
+                   "lighting (small intense lights, exposure) and geometry (fences, wires, layer stacks).")
 @click.option("--kind", "kinds", multiple=True, type=click.Choice(["deepz", "deepoid"]),
               help="Deep kinds to write (default: both).")
 @click.option("--workers", default=min(2, os.cpu_count() or 1), show_default=True, type=click.IntRange(1),

@@ -13,8 +13,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-PRESETS = ("easy", "medium", "deep-heavy")
-CUTOUT_NONE, CUTOUT_LEAF = 0, 1
+CUTOUT_NONE, CUTOUT_LEAF, CUTOUT_FENCE = 0, 1, 2
 
 
 @dataclass
@@ -107,6 +106,39 @@ def _bsdf(rng: np.random.Generator, glossy_prob: float) -> dict:
     return {"type": "diffuse", "reflectance": {"type": "rgb", "value": _rgb(rng)}}
 
 
+def _material(rng: np.random.Generator, weights: dict, tex_freq) -> dict:
+    """A BSDF drawn from a family's material weights (MATERIALS)."""
+    names = list(weights)
+    p = np.asarray([weights[n] for n in names], float)
+    kind = names[int(rng.choice(len(names), p=p / p.sum()))]
+    if kind == "diffuse":
+        return {"type": "diffuse", "reflectance": {"type": "rgb", "value": _rgb(rng, 0.03, 0.95)}}
+    if kind == "textured":
+        f = float(np.exp(rng.uniform(np.log(tex_freq[0]), np.log(tex_freq[1]))))
+        tex = {"type": "checkerboard", "color0": {"type": "rgb", "value": _rgb(rng, 0.02, 0.9)},
+               "color1": {"type": "rgb", "value": _rgb(rng, 0.02, 0.9)}, "to_uv": scale([f, f, 1]).tolist()}
+        if rng.random() < 0.3:
+            return {"type": "roughplastic", "distribution": "ggx", "alpha": float(rng.uniform(0.1, 0.4)),
+                    "diffuse_reflectance": tex}
+        return {"type": "diffuse", "reflectance": tex}
+    if kind in ("plastic", "roughplastic"):
+        d = {"type": kind, "diffuse_reflectance": {"type": "rgb", "value": _rgb(rng, 0.03, 0.9)}}
+        if kind == "roughplastic":
+            d.update(distribution="ggx", alpha=float(rng.uniform(0.05, 0.4)))
+        return d
+    if kind in ("conductor", "roughconductor"):
+        d = {"type": kind, "material": "none", "specular_reflectance": {"type": "rgb", "value": _rgb(rng, 0.3, 0.98)}}
+        if kind == "roughconductor":
+            d.update(distribution="ggx", alpha=float(rng.uniform(0.03, 0.5)))
+        return d
+    if kind == "roughdielectric":
+        return {"type": "roughdielectric", "distribution": "ggx", "alpha": float(rng.uniform(0.03, 0.3)),
+                "int_ior": float(rng.uniform(1.3, 1.8))}
+    if kind == "dielectric":
+        return {"type": "dielectric", "int_ior": float(rng.uniform(1.3, 1.8))}
+    return {"type": "thindielectric", "int_ior": float(rng.uniform(1.3, 1.6))}
+
+
 # ---- the generator -------------------------------------------------------------------------------------
 PRESET_PARAMS = {
     # objects, panes, cards, thin, glossy share, DOF probability, motion scale
@@ -117,6 +149,40 @@ PRESET_PARAMS = {
     "deep-heavy": dict(objects=(5, 8), panes=(3, 5), cards=(8, 12), thin=(2, 4), veils=(2, 3), glossy=0.5,
                        dof=0.6, motion=1.0),
 }
+
+# Scene families for generalization (domain randomisation): each family draws, per scene, from its own ranges
+# of materials (`materials`: weights of MATERIALS), geometry (objects, thin wires, panes, foliage cards, fences,
+# stacks of semi-transparent layers, thin glass sheets), lighting (`small_lights`: intense small emitters that
+# make fireflies and caustics through glass; `exposure`: +- stops applied to every light), camera (`fov`, `dof`)
+# and texture frequency. The three presets above keep their original draws (datasets made before the families
+# existed render identically); a family's extra axes are drawn after them.
+MATERIALS = ("diffuse", "plastic", "roughplastic", "conductor", "roughconductor", "dielectric", "roughdielectric",
+             "thindielectric", "textured")
+_NEW = dict(objects=(3, 6), panes=(0, 1), cards=(0, 1), thin=(0, 2), veils=(0, 0), glossy=0.4, dof=0.3,
+            motion=1.0, materials=None, small_lights=(0, 0), exposure=2.0, fov=(25, 60), fences=(0, 0),
+            stacks=(0, 0), glass_sheets=(0, 0), tex_freq=(2, 32))
+FAMILY_PARAMS = {
+    # polished objects under small intense lights: conductors, plastics and glass (caustics, fireflies)
+    "studio": {**_NEW, "objects": (3, 6), "panes": (0, 0), "thin": (0, 1),
+               "materials": dict(plastic=2, roughplastic=2, conductor=2, roughconductor=2, dielectric=2,
+                                 roughdielectric=1, diffuse=1), "small_lights": (1, 3)},
+    # refraction: solid and rough glass objects, thin glass sheets in front of the scene, semi-transparent panes
+    "glass": {**_NEW, "objects": (3, 6), "panes": (1, 2), "glass_sheets": (1, 3),
+              "materials": dict(dielectric=3, roughdielectric=2, thindielectric=1, diffuse=2, textured=1,
+                                conductor=1), "small_lights": (0, 1)},
+    # thin geometry: foliage cards, fences, wires and poles at many scales
+    "thin": {**_NEW, "objects": (2, 4), "cards": (6, 14), "thin": (4, 10), "fences": (1, 3),
+             "materials": dict(diffuse=3, textured=2, roughplastic=1, roughconductor=1)},
+    # stacks of 4-8 semi-transparent layers across the view (deep-heavy pixels), textured backgrounds
+    "layers": {**_NEW, "objects": (3, 5), "stacks": (1, 1), "panes": (0, 2),
+               "materials": dict(diffuse=2, textured=2, plastic=1, roughconductor=1)},
+    # textured albedo at many frequencies, many mid-size objects, wide and long lenses
+    "textured": {**_NEW, "objects": (5, 9), "thin": (0, 2), "cards": (0, 3), "fov": (15, 70), "dof": 0.5,
+                 "materials": dict(textured=5, diffuse=1, roughplastic=1, roughconductor=1)},
+}
+PRESET_PARAMS.update(FAMILY_PARAMS)
+PRESETS = ("easy", "medium", "deep-heavy")           # the original presets, used in turn by default
+FAMILIES = tuple(PRESET_PARAMS)                      # every named scene family `ranad synth --preset` accepts
 
 
 def _animated(base: np.ndarray, frames: int, velocity, spin_axis, spin_deg: float) -> list:
@@ -141,6 +207,7 @@ def make_scene(seed: int, preset: str = "medium", size: int = 128, frames: int =
     if preset not in PRESET_PARAMS:
         raise ValueError(f"unknown preset {preset!r} (one of {', '.join(PRESETS)})")
     p = PRESET_PARAMS[preset]
+    family = p.get("materials") is not None
     rng = np.random.default_rng(seed)
     m = p["motion"] * motion
     cam_o = np.array([rng.uniform(-1.0, 1.0), rng.uniform(1.0, 2.2), rng.uniform(6.0, 7.5)])
@@ -148,12 +215,19 @@ def make_scene(seed: int, preset: str = "medium", size: int = 128, frames: int =
     cam_v = rng.normal(0, 0.06 * m, 3)
     camera = Camera(origin=[list(cam_o + cam_v * (f - (frames - 1) / 2)) for f in range(frames)],
                     target=[list(cam_t) for _ in range(frames)], fov=float(rng.uniform(32, 45)))
+    if family:
+        camera.fov = float(rng.uniform(*p["fov"]))
     if rng.random() < p["dof"]:
         camera.aperture = float(rng.uniform(0.03, 0.12))
         camera.focus = float(np.linalg.norm(cam_o - cam_t) + rng.uniform(-1.0, 1.0))
     spec = SceneSpec(seed=seed, preset=preset, width=size, height=size, frames=frames, camera=camera,
                      light_groups=["key", "fill", "rim"][: int(rng.integers(2, 4))])
     next_id = iter(range(1, 1000))
+    if family:  # the family's material mix replaces the presets' diffuse/glossy choice
+        def _bsdf(rng, glossy):  # noqa: F811 (shadows the module-level sampler on purpose)
+            return _material(rng, p["materials"], p["tex_freq"])
+    else:
+        _bsdf = globals()["_bsdf"]
 
     def add(kind, bsdf, base, *, vel=None, spin=0.0, **kw):
         vel = rng.normal(0, 0.12 * m, 3) if vel is None else vel
@@ -190,6 +264,8 @@ def make_scene(seed: int, preset: str = "medium", size: int = 128, frames: int =
         leaf = {"type": "twosided", "bsdf": {"type": "diffuse",
                                              "reflectance": {"type": "rgb", "value": _rgb(rng, 0.05, 0.5)}}}
         add("rectangle", leaf, base, cutout=CUTOUT_LEAF, spin=float(rng.uniform(-25, 25) * m))
+    if family:
+        _family_extras(spec, p, rng, add, cam_o, cam_t, m)
     # area lights, one light group each (several lights may share a group)
     for g, _name in enumerate(spec.light_groups):
         for _ in range(1 if g else int(rng.integers(1, 3))):
@@ -199,7 +275,45 @@ def make_scene(seed: int, preset: str = "medium", size: int = 128, frames: int =
             col = np.clip(rng.normal(1.0, 0.15, 3), 0.6, 1.4) * power
             add("rectangle", {"type": "diffuse"}, base, vel=np.zeros(3),
                 radiance=tuple(float(c) for c in col), light_group=g)
+    if family:
+        for _ in range(int(rng.integers(*p["small_lights"], endpoint=True))):  # small, intense: fireflies
+            pos = [rng.uniform(-3, 3), rng.uniform(0.8, 4.0), rng.uniform(-2.5, 4)]
+            size = rng.uniform(0.03, 0.12)
+            base = look_at(pos, [rng.uniform(-1, 1), 0.4, rng.uniform(-1, 1)]) @ scale(size)
+            col = np.clip(rng.normal(1.0, 0.2, 3), 0.5, 1.5) * rng.uniform(1.0, 4.0) / size ** 2
+            add("rectangle", {"type": "diffuse"}, base, vel=np.zeros(3),
+                radiance=tuple(float(c) for c in col), light_group=int(rng.integers(0, len(spec.light_groups))))
+        gain = 2.0 ** rng.uniform(-p["exposure"], p["exposure"])   # the scene's exposure, +- stops
+        for o in spec.objects:
+            if o.radiance is not None:
+                o.radiance = tuple(float(c * gain) for c in o.radiance)
     return spec
+
+
+def _family_extras(spec: SceneSpec, p: dict, rng: np.random.Generator, add, cam_o, cam_t, m: float) -> None:
+    """The geometry axes only families draw: fences, stacks of semi-transparent layers, thin glass sheets."""
+    for _ in range(int(rng.integers(*p["fences"], endpoint=True))):  # fences: a grid of bars cut out of a card
+        pos = [rng.uniform(-2.0, 2.0), rng.uniform(0.4, 1.0), rng.uniform(-1.0, 3.0)]
+        base = translate(pos) @ rotate([0, 1, 0], rng.uniform(-60, 60)) @ scale([rng.uniform(0.6, 1.6),
+                                                                                  rng.uniform(0.4, 0.9), 1])
+        add("rectangle", {"type": "twosided", "bsdf": _material(rng, dict(diffuse=2, roughconductor=1), (2, 8))},
+            base, cutout=CUTOUT_FENCE, vel=np.zeros(3) if rng.random() < 0.5 else None)
+    for _ in range(int(rng.integers(*p["stacks"], endpoint=True))):  # 4-8 parallel semi-transparent layers
+        layers = int(rng.integers(4, 9))
+        start, step = rng.uniform(0.15, 0.35), rng.uniform(0.04, 0.1)
+        shift = rng.normal(0, 0.3, 3)
+        for k in range(layers):
+            pos = cam_o + (cam_t - cam_o) * (start + step * k) + shift * (1 + 0.2 * k)
+            base = look_at(pos, cam_o) @ rotate([0, 0, 1], rng.uniform(-20, 20)) @ \
+                scale([rng.uniform(0.3, 0.9), rng.uniform(0.25, 0.7), 1])
+            mat = _material(rng, dict(diffuse=2, textured=1, roughplastic=1), (2, 16))
+            add("rectangle", {"type": "twosided", "bsdf": mat}, base, opacity=float(rng.uniform(0.1, 0.45)),
+                spin=float(rng.uniform(-4, 4) * m))
+    for _ in range(int(rng.integers(*p["glass_sheets"], endpoint=True))):  # thin glass in front of the scene
+        pos = cam_o + (cam_t - cam_o) * rng.uniform(0.3, 0.7) + rng.normal(0, 0.4, 3)
+        base = look_at(pos, cam_o) @ rotate([0, 1, 0], rng.uniform(-30, 30)) @ \
+            scale([rng.uniform(0.3, 0.8), rng.uniform(0.3, 0.7), 1])
+        add("rectangle", {"type": "thindielectric", "int_ior": float(rng.uniform(1.3, 1.6))}, base)
 
 
 def mitsuba_dict(spec: SceneSpec, frame: int) -> dict:
@@ -230,7 +344,7 @@ def convert_transforms(d: dict) -> dict:
     for key, val in d.items():
         if isinstance(val, dict):
             val = convert_transforms(val)
-        if key == "to_world":
+        if key in ("to_world", "to_uv"):
             val = mi.ScalarTransform4f(np.asarray(val, dtype=np.float64).tolist())
         out[key] = val
     return out

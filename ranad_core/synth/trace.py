@@ -25,7 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .mitsuba_env import mitsuba
-from .scene import CUTOUT_LEAF, SceneSpec, convert_transforms, look_at, mitsuba_dict
+from .scene import CUTOUT_FENCE, CUTOUT_LEAF, SceneSpec, convert_transforms, look_at, mitsuba_dict
 
 MAX_PASS_THROUGH = 16   # surfaces a sample may pass through before it is stopped at the next one
 MAX_GROUPS = 3          # light groups the loop carries
@@ -124,6 +124,12 @@ def _leaf_alpha(mi, dr, uv):
     return dr.select(ell & ~gaps, 1.0, 0.0)
 
 
+def _fence_alpha(mi, dr, uv):
+    """A fence's cutout: vertical and horizontal bars (a wire grid) on the card's uv square."""
+    fu, fv = uv.x * 9.0 - dr.floor(uv.x * 9.0), uv.y * 6.0 - dr.floor(uv.y * 6.0)
+    return dr.select((fu < 0.16) | (fv < 0.1), 1.0, 0.0)
+
+
 def _mis(a, b):
     import drjit as dr
 
@@ -162,6 +168,7 @@ def _loop(mi, dr, scene, emitters, n_emitters, ray, rng, tables, cam_o, cam_f, m
         alpha = dr.gather(mi.Float, opac_t, reg, valid)
         cut = dr.gather(mi.UInt32, cut_t, reg, valid)
         alpha = dr.select(cut == CUTOUT_LEAF, alpha * _leaf_alpha(mi, dr, si.uv), alpha)
+        alpha = dr.select(cut == CUTOUT_FENCE, alpha * _fence_alpha(mi, dr, si.uv), alpha)
         u = r.next_float32()
         passes = valid & (u >= alpha) & (st["passes"] < MAX_PASS_THROUGH)
         shade = valid & ~passes
