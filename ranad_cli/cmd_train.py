@@ -26,8 +26,10 @@ from tqdm import tqdm
 @click.option("--window", default=3, show_default=True, type=click.IntRange(2, 7),
               help="Cross-frame configs (e.g. cpu-small-xf): frames per training window around the centre.")
 @click.option("--init", default=None,
-              help="Cross-frame configs: weights to start from (model name, .safetensors or run): a single-frame "
-                   "model's, or for a config with the output mix (cpu-small-xfm) a cross-frame model's without it.")
+              help="Weights to start from (model name, .safetensors or run): for a single-frame config, a "
+                   "single-frame model of the same size (also of another feature set, e.g. cpu-small-v1 for "
+                   "cpu-small-p); for a cross-frame config, a single-frame model's, or for a config with the "
+                   "output mix (cpu-small-xfm) a cross-frame model's without it.")
 @click.option("--temporal-weight", default=0.0, show_default=True, type=click.FloatRange(0),
               help="Cross-frame configs: weight of a temporal loss on two consecutive frames per step (each denoised "
                    "with its own window): the change of the flattened result from one frame to the next against the "

@@ -37,6 +37,12 @@ ALIASES = {
 }
 COMPONENTS = {"rgb": (("R", "G", "B"), ("r", "g", "b")), "xyz": (("X", "Y", "Z"), ("x", "y", "z"))}
 CANONICAL = {"diffuse": "diffuse", "specular": "specular", "emission": "emission", "albedo": "albedo", "normal": "N"}
+# Per-bin copies of per-pixel values that ranad itself adds to the canonical image (never read from or written to
+# files): the flat prior (OIDN's denoised flattened beauty of the bin's pixel; `PRIOR_NOAUX` the same without the
+# albedo/normal guides, for training's reduced-mode crops) and the pixel's flattened noisy beauty.
+PRIOR = ("ranad_prior.R", "ranad_prior.G", "ranad_prior.B")
+PRIOR_NOAUX = ("ranad_prior_noaux.R", "ranad_prior_noaux.G", "ranad_prior_noaux.B")
+FLAT_NOISY = ("ranad_flat.R", "ranad_flat.G", "ranad_flat.B")
 
 
 @dataclass

@@ -138,28 +138,42 @@ def _fix_nonfinite(img: DeepImage) -> tuple[DeepImage, int]:
 
 @dataclass
 class _Frame:
-    """One frame of a window as the model reads it: canonical, sorted, with its residual and depth stats."""
+    """One frame of a window as the model reads it: canonical, sorted, with its residual, depth stats, exposure
+    scale and feature set (the flat prior's channels attached for "prior" models)."""
     srt: DeepImage
     perm: np.ndarray
     residual: np.ndarray | None
     stats: tuple
     nonfinite: int
+    features: str = "log1p"
+    scale: float = 1.0
 
 
-def _model_frame(img: DeepImage, mapping: ChannelMap) -> _Frame:
+def model_features(model) -> str:
+    return getattr(model.config, "features", "log1p")
+
+
+def _model_frame(img: DeepImage, mapping: ChannelMap, features: str = "log1p") -> _Frame:
     canon, residual = canonical(img, mapping)
     canon, nonfinite = _fix_nonfinite(canon)
     if residual is not None:
         residual = np.nan_to_num(residual, nan=0.0, posinf=0.0, neginf=0.0)
     srt, perm = canon.sorted()
-    return _Frame(srt, perm, residual[perm] if residual is not None else None, depth_stats(srt), nonfinite)
+    res = residual[perm] if residual is not None else None
+    scale = 1.0
+    if features == "prior":  # whole-frame prior and exposure, before tiling, so tiles agree
+        from .model.prior import frame_scale, with_prior
+
+        srt = with_prior(srt, res)
+        scale = frame_scale(srt)
+    return _Frame(srt, perm, res, depth_stats(srt), nonfinite, features, scale)
 
 
 def _tile_inputs(fr: _Frame, win, width: int):
     idx, local = window_bins(fr.srt.offsets, width, win)
     sub = DeepImage(values=fr.srt.values[idx], offsets=local, channels=fr.srt.channels,
                     data_window=(0, 0, win[2] - win[0], win[3] - win[1]))
-    inputs = prepare(sub, fr.stats)
+    inputs = prepare(sub, fr.stats, fr.features, fr.scale)
     if fr.residual is not None:
         inputs.layers["diffuse"] = torch.cat([inputs.layers["diffuse"], torch.from_numpy(fr.residual[idx])], 1)
     return inputs, idx, local
@@ -194,7 +208,7 @@ def denoise_window(model, images: list, centre: int, mapping: ChannelMap | None 
     img = images[centre]
     mapping = mapping or detect(img)
     moved, dropped = compensate(images, centre) if len(images) > 1 else (images, 0)
-    frames = [_model_frame(m, mapping) for m in moved]
+    frames = [_model_frame(m, mapping, model_features(model)) for m in moved]
     c = frames[centre]
     n = c.srt.num_bins
     h, w = c.srt.height, c.srt.width

@@ -33,6 +33,7 @@ class ModelConfig:
     window: int = 1              # frames the model sees (1: single-frame; >1: cross-frame, up to this many)
     temporal_radius: float = 1.0  # radius of the T-Mix blocks and the temporal reconstruction step
     output_mix: bool = False      # cross-frame: a temporal step over the window's spatially denoised frames at the end
+    features: str = "log1p"       # input feature set (inputs.FEATURE_SETS): "prior" = exposure-normalised + flat prior
 
     def to_dict(self) -> dict:
         d = asdict(self)
@@ -68,6 +69,10 @@ CONFIGS["cpu-small-xf"] = ModelConfig(**{**CONFIGS["cpu-small"].__dict__, "name"
 # cpu-small-xf plus the output mix (crossframe.py): every frame of the window reconstructed, then mixed in time
 CONFIGS["cpu-small-xfm"] = ModelConfig(**{**CONFIGS["cpu-small-xf"].__dict__, "name": "cpu-small-xfm",
                                          "output_mix": True})
+
+
+# cpu-small reading exposure-normalised radiance and OIDN's flat prior (inputs.py, prior.py); issue 24
+CONFIGS["cpu-small-p"] = ModelConfig(**{**CONFIGS["cpu-small"].__dict__, "name": "cpu-small-p", "features": "prior"})
 
 
 def get_config(name: str) -> ModelConfig:

@@ -4,6 +4,11 @@ Transforms suited to each kind of data: radiance-like layers through log1p (HDR 
 are, depth as log depth standardised per image (scale-free), albedo and normals as they are; then a positional
 encoding of the pixel position (periodic, so tiles are treated alike) and of the bin index within its pixel
 (bins in front-to-back order). The noisy layers the reconstruction denoises are returned alongside.
+
+Feature sets (a model's config names the one it was trained with, `ModelConfig.features`):
+- "log1p": radiance as log1p of its absolute value (the v1 models; their output moves with exposure);
+- "prior": radiance divided by the frame's exposure scale first (exposure-invariant), plus the flat prior and the
+  pixel's flattened noisy beauty, both divided by the same scale (prior.py; channels added by `with_prior`).
 """
 
 from __future__ import annotations
@@ -14,6 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
+from ..channels import FLAT_NOISY, PRIOR
 from ..deep import DeepImage
 from .layers import Layout
 
@@ -34,8 +40,21 @@ class ModelInputs:
         return self.features.shape[1]
 
 
-def feature_dim() -> int:
-    return 2 * 3 + 2 + 1 + 3 + 3 + 4 * len(PERIODS) + 2 * BIN_FREQS + 1
+FEATURE_SETS = ("log1p", "prior")
+
+
+def feature_dim(features: str = "log1p") -> int:
+    base = 2 * 3 + 2 + 1 + 3 + 3 + 4 * len(PERIODS) + 2 * BIN_FREQS + 1
+    return base + (6 if features == "prior" else 0)
+
+
+def old_columns(old: str, new: str) -> list:
+    """Where each feature column of set `old` sits in set `new` (the "prior" set inserts its 6 columns after the
+    guides, before the position encodings): how a model of one set starts training with another's weights."""
+    head = 2 * 3 + 2 + 1 + 3 + 3
+    idx = list(range(feature_dim(old)))
+    shift = feature_dim(new) - feature_dim(old)
+    return [i if i < head else i + shift for i in idx]
 
 
 def _cols(img: DeepImage, names) -> np.ndarray:
@@ -55,9 +74,15 @@ def depth_stats(img: DeepImage) -> tuple[float, float]:
     return float(logz.mean()), float(logz.std())
 
 
-def prepare(img: DeepImage, z_stats: tuple[float, float] | None = None) -> ModelInputs:
+def prepare(img: DeepImage, z_stats: tuple[float, float] | None = None, features: str = "log1p",
+            scale: float = 1.0) -> ModelInputs:
     """Features and noisy layers of a deep image whose bins are in front-to-back order within each pixel.
-    `z_stats`: the log-depth standardisation (default: this image's own, see `depth_stats`)."""
+    `z_stats`: the log-depth standardisation (default: this image's own, see `depth_stats`); `features`: the
+    feature set (FEATURE_SETS); `scale`: the frame's exposure scale ("prior" features; prior.frame_scale of the
+    whole frame, so that tiles and crops agree)."""
+    if features not in FEATURE_SETS:
+        raise ValueError(f"unknown feature set {features!r} (known: {', '.join(FEATURE_SETS)})")
+    inv = 1.0 / scale if features == "prior" else 1.0
     n = img.values.shape[0]
     layers = {}
     for name in RADIANCE_LAYERS:
@@ -69,8 +94,13 @@ def prepare(img: DeepImage, z_stats: tuple[float, float] | None = None) -> Model
     mean, std = depth_stats(img) if z_stats is None else z_stats
     zn = ((np.log(np.maximum(layers["depth"], 1e-4)) - mean) / (std + 1e-6)).astype(np.float32)
     aux = [_cols(img, names) if _has(img, names) else np.zeros((n, 3), np.float32) for names in AUX.values()]
-    base = np.concatenate([np.log1p(np.maximum(layers["diffuse"], 0)), np.log1p(np.maximum(layers["specular"], 0)),
-                           layers["alpha"], cov, zn, *aux], axis=1)
+    rad = lambda x: np.log1p(np.maximum(np.asarray(x, np.float32) * np.float32(inv), 0))  # noqa: E731
+    extra = []
+    if features == "prior":
+        for names in (PRIOR, FLAT_NOISY):
+            extra.append(rad(_cols(img, names)) if _has(img, names) else np.zeros((n, 3), np.float32))
+    base = np.concatenate([rad(layers["diffuse"]), rad(layers["specular"]), layers["alpha"], cov, zn, *aux,
+                           *extra], axis=1)
     layout = Layout.of(torch.from_numpy(img.offsets), img.height, img.width)
     y, x = layout.pixels[:, 0].float(), layout.pixels[:, 1].float()
     pos = [f(2 * math.pi * t / p) for p in PERIODS for t in (x, y) for f in (torch.sin, torch.cos)]

@@ -107,9 +107,9 @@ def load_model(spec: str | None = None, backend: str = "auto") -> LoadedModel:
     if config.window > 1:
         from .crossframe import CrossFrameRaNAD
 
-        model = CrossFrameRaNAD(config, feature_dim(), backend=backend)
+        model = CrossFrameRaNAD(config, feature_dim(config.features), backend=backend)
     else:
-        model = RaNAD(config, feature_dim(), backend=backend)
+        model = RaNAD(config, feature_dim(config.features), backend=backend)
     try:
         model.load_state_dict(state)
     except RuntimeError as e:

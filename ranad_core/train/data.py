@@ -11,6 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..channels import PRIOR, PRIOR_NOAUX
 from ..deep import DeepImage, gather_bins
 from ..errors import RanadError
 from ..exr import read_deep
@@ -87,6 +88,39 @@ def load(path: Path) -> DeepImage:
     return read_deep(path)
 
 
+@lru_cache(maxsize=1024)
+def load_noisy(path: Path, features: str = "log1p") -> DeepImage:
+    """A noisy frame as training reads it: with the flat prior's channels (guided and unguided) for the "prior"
+    feature set, computed once per file on the whole frame, as `ranad denoise` does."""
+    img = load(path)
+    if features == "prior":
+        from ..model.prior import with_prior
+
+        img = with_prior(img, both=True)
+    return img
+
+
+@dataclass(frozen=True)
+class FrameContext:
+    """Whole-frame statistics a crop's features use (so that crops see what `ranad denoise` gives a tile)."""
+    z_stats: tuple
+    scale: float
+
+
+@lru_cache(maxsize=1024)
+def frame_context(path: Path, features: str = "log1p") -> FrameContext:
+    from ..model.inputs import depth_stats
+
+    img = load_noisy(path, features)
+    srt, _ = img.sorted()
+    scale = 1.0
+    if features == "prior":
+        from ..model.prior import frame_scale
+
+        scale = frame_scale(img)
+    return FrameContext(depth_stats(srt), scale)
+
+
 def transform(img: DeepImage, flip_x: bool, flip_y: bool, transpose: bool) -> DeepImage:
     """The image flipped and/or transposed (pixels moved with their bins; screen-space motion vectors follow)."""
     h, w = img.height, img.width
@@ -129,9 +163,9 @@ def random_window(img: DeepImage, rng: np.random.Generator, crop: int) -> tuple:
     return (x0, y0, x0 + cw - 1, y0 + ch - 1)
 
 
-def sample(pair: Pair, rng: np.random.Generator, crop: int) -> tuple:
+def sample(pair: Pair, rng: np.random.Generator, crop: int, features: str = "log1p") -> tuple:
     """A random crop (the same window for noisy and reference) with a random flip/transpose."""
-    noisy, ref = load(pair.noisy), load(pair.reference)
+    noisy, ref = load_noisy(pair.noisy, features), load(pair.reference)
     win = random_window(noisy, rng, crop)
     fx, fy, tr = (bool(b) for b in rng.integers(0, 2, 3))
     noisy, ref = sorted_pair(noisy.crop(win), ref.crop(win))
@@ -150,8 +184,14 @@ SPLIT_LAYERS = ("diffuse", "specular")
 
 
 def without_aux(img: DeepImage) -> DeepImage:
-    """The image without albedo and normal channels (what many renderers' deep outputs lack)."""
-    return img.select([c for c in img.channels if c.split(".")[0] not in AUX_LAYERS])
+    """The image without albedo and normal channels (what many renderers' deep outputs lack); a flat prior it
+    carries becomes the one computed without them."""
+    if all(c in img.channels for c in PRIOR_NOAUX + PRIOR):
+        vals = img.values.copy()
+        for a, b in zip(PRIOR, PRIOR_NOAUX):
+            vals[:, img.channels.index(a)] = img.channel(b)
+        img = img.with_values(vals)
+    return img.select([c for c in img.channels if c.split(".")[0] not in AUX_LAYERS and c not in PRIOR_NOAUX])
 
 
 def merged_split(img: DeepImage) -> DeepImage:

@@ -25,7 +25,10 @@ def composite(layers: dict, offsets: torch.Tensor) -> torch.Tensor:
     return flatten_torch(values, offsets, 3)[:, :3]
 
 
-def total_loss(pred: dict, ref: dict, offsets: torch.Tensor, size: tuple[int, int]) -> tuple[torch.Tensor, dict]:
+def total_loss(pred: dict, ref: dict, offsets: torch.Tensor, size: tuple[int, int],
+               scale: float = 1.0) -> tuple[torch.Tensor, dict]:
+    """`scale`: the frame's exposure scale; the SSIM term tone-maps the composite divided by it (so the loss, like
+    the other terms, does not depend on the render's brightness)."""
     h, w = size
     parts = {"diffuse": smape(pred["diffuse"], ref["diffuse"]), "specular": smape(pred["specular"], ref["specular"]),
              "alpha": (pred["alpha"] - ref["alpha"]).abs().mean(),
@@ -33,7 +36,7 @@ def total_loss(pred: dict, ref: dict, offsets: torch.Tensor, size: tuple[int, in
     cp, cr = composite(pred, offsets), composite(ref, offsets)
     parts["composite"] = smape(cp, cr)
     if h >= 4 and w >= 4:
-        img = lambda x: tonemap(x).T.reshape(3, h, w)  # noqa: E731
+        img = lambda x: tonemap(x / scale).T.reshape(3, h, w)  # noqa: E731
         parts["composite_ssim"] = 1 - ssim(img(cp), img(cr))
     loss = sum(WEIGHTS[k] * v for k, v in parts.items())
     return loss, {k: v.item() for k, v in parts.items()}

@@ -19,8 +19,8 @@ import torch
 from ..errors import RanadError
 from ..fileutil import atomic_output
 from ..model import RaNAD, feature_dim, get_config, prepare
-from .data import (find_frame_pairs, find_pairs, reduce_inputs, reduce_window, sample, sample_consecutive,
-                   sample_window)
+from .data import (find_frame_pairs, find_pairs, frame_context, reduce_inputs, reduce_window, sample,
+                   sample_consecutive, sample_window)
 from .losses import temporal_loss, total_loss
 
 CHECKPOINT = "checkpoint.pt"
@@ -108,7 +108,10 @@ def build_model(cfg: TrainConfig, config):
     training begins from a working denoiser: a single-frame model's, or a cross-frame model's without the output
     mix for a config with it)."""
     if config.window <= 1:
-        return RaNAD(config, feature_dim())
+        model = RaNAD(config, feature_dim(config.features))
+        if cfg.init:
+            init_single(model, cfg.init)
+        return model
     from ..model.crossframe import CrossFrameRaNAD
 
     if cfg.init:
@@ -122,11 +125,36 @@ def build_model(cfg: TrainConfig, config):
                 raise RanadError(f"--init: a cross-frame model starts only a config with the output mix (such as "
                                  f"cpu-small-xfm), not {config.name!r}", cfg.init)
             try:
-                return CrossFrameRaNAD.from_cross(init, config, feature_dim()).train()
+                return CrossFrameRaNAD.from_cross(init, config, feature_dim(config.features)).train()
             except ValueError as e:
                 raise RanadError(f"--init: {e}", cfg.init) from None
-        return CrossFrameRaNAD.from_single(init, config, feature_dim()).train()
-    return CrossFrameRaNAD(config, feature_dim())
+        return CrossFrameRaNAD.from_single(init, config, feature_dim(config.features)).train()
+    return CrossFrameRaNAD(config, feature_dim(config.features))
+
+
+def unwrap(net):
+    """The model inside a DistributedDataParallel wrapper (or the model itself)."""
+    return getattr(net, "module", net)
+
+
+def init_single(model, init_name: str) -> None:
+    """Starts single-frame `model` from single-frame weights `init_name` of the same architecture, also when the
+    feature sets differ (the new feature columns start at zero, so the model begins as the old one would on its
+    shared inputs)."""
+    from ..model.inputs import old_columns
+    from ..model.store import load_model
+
+    init = load_model(init_name).model
+    a, b = init.config, model.config
+    if a.window > 1 or (a.dim, a.unets, a.levels, a.heads, a.head_dim) != (b.dim, b.unets, b.levels, b.heads,
+                                                                            b.head_dim):
+        raise RanadError(f"--init model {a.name!r} does not match config {b.name!r}", init_name)
+    state = init.state_dict()
+    w = state["embed.0.weight"]
+    new = w.new_zeros(w.shape[0], model.embed[0].in_features)
+    new[:, old_columns(a.features, b.features)] = w
+    state["embed.0.weight"] = new
+    model.load_state_dict(state)
 
 
 def pair_loss(net, pair, rng: np.random.Generator, cfg: TrainConfig, cross: bool):
@@ -138,11 +166,17 @@ def pair_loss(net, pair, rng: np.random.Generator, cfg: TrainConfig, cross: bool
         window = [prepare(f) for f in frames]
         noisy, ref = window[centre], prepare(ref_img)
     else:
-        noisy_img, ref_img = reduce_inputs(*sample(pair, rng, cfg.crop), rng, cfg.p_no_aux, cfg.p_no_split)
-        noisy, ref = prepare(noisy_img), prepare(ref_img)
+        features = unwrap(net).config.features
+        ctx = frame_context(pair.noisy, features)
+        noisy_img, ref_img = reduce_inputs(*sample(pair, rng, cfg.crop, features), rng, cfg.p_no_aux,
+                                           cfg.p_no_split)
+        noisy, ref = prepare(noisy_img, ctx.z_stats, features, ctx.scale), prepare(ref_img)
+        if noisy.layout.bins == 0:
+            return None
+        return total_loss(net(noisy), ref.layers, noisy.layout.offsets, noisy.layout.size, ctx.scale)
     if noisy.layout.bins == 0:
         return None
-    pred = net(window, centre) if cross else net(noisy)
+    pred = net(window, centre)
     return total_loss(pred, ref.layers, noisy.layout.offsets, noisy.layout.size)
 
 

@@ -1,0 +1,124 @@
+"""Frame-level inputs of the model: the exposure scale and the flat prior (issue 24).
+
+- Exposure: radiance features are divided by one robust scale per frame (the median luminance of the frame's
+  flattened noisy beauty over its covered pixels) before log1p, so the features, and with them the kernels, do not
+  change when a render is brighter or darker; since every output is a softmax-weighted average of noisy values,
+  scaling the input by k scales the output by exactly k. The scale is computed over the whole frame (tiles agree),
+  like OIDN's auto-exposure.
+- Flat prior: OIDN's denoised flattened beauty of each bin's pixel (with the flattened albedo/normal guides when
+  the frame has them) and the pixel's flattened noisy beauty, copied onto every bin of the pixel as extra
+  channels (names in channels.py). OIDN was trained on far more scenes than ranad can render; given to the model
+  as features, it steers the kernels (which neighbours look like the clean image), while the outputs stay
+  softmax-weighted combinations of the noisy values, so AOV reuse and sum-to-beauty stay exact.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import torch
+
+from ..channels import FLAT_NOISY, PRIOR, PRIOR_NOAUX
+from ..deep import DeepImage, flatten_torch
+from ..errors import RanadError
+
+LUMA = np.array([0.2126, 0.7152, 0.0722], np.float64)
+AUX = (("albedo.R", "albedo.G", "albedo.B"), ("N.X", "N.Y", "N.Z"))
+
+
+def beauty(img: DeepImage, residual: np.ndarray | None = None) -> np.ndarray:
+    """[N, 3] per-bin beauty of a canonical image: diffuse + specular + emission (+ the residual the split leaves
+    out); a file in ranad synth's convention may be passed as is (its R, G, B are used)."""
+    if all(c in img.channels for c in ("R", "G", "B")):
+        return np.stack([img.channel(c) for c in "RGB"], 1).astype(np.float32)
+    out = np.zeros((img.num_bins, 3), np.float32)
+    for layer in ("diffuse", "specular", "emission"):
+        if f"{layer}.R" in img.channels:
+            out += np.stack([img.channel(f"{layer}.{c}") for c in "RGB"], 1)
+    if residual is not None:
+        out += residual
+    return out
+
+
+def _flat(img: DeepImage, cols: np.ndarray, premultiplied: bool) -> np.ndarray:
+    """[P, C] front-to-back composite of per-bin columns `cols` (bins must be sorted front to back);
+    unpremultiplied columns are weighted by coverage and normalised by the pixel's alpha."""
+    a = img.channel("A").astype(np.float32)[:, None]
+    vals = cols if premultiplied else cols * a
+    out = flatten_torch(torch.from_numpy(np.concatenate([vals, a], 1).astype(np.float32)),
+                        torch.from_numpy(img.offsets), cols.shape[1]).numpy()
+    if premultiplied:
+        return out[:, :-1]
+    return out[:, :-1] / np.maximum(out[:, -1:], 1e-6)
+
+
+def exposure_scale(flat_rgb: np.ndarray) -> float:
+    """The frame's exposure: median luminance of its covered pixels (those with positive luminance); 1 for a black
+    frame. A median commutes with scaling, so a frame scaled by k has scale k times this one."""
+    lum = np.asarray(flat_rgb, np.float64) @ LUMA
+    lum = lum[np.isfinite(lum) & (lum > 0)]
+    if lum.size == 0:
+        return 1.0
+    return float(np.median(lum))
+
+
+def _oidn(colour: np.ndarray, albedo: np.ndarray | None, normal: np.ndarray | None) -> np.ndarray:
+    try:
+        import pyoidn
+    except ImportError as e:  # a core dependency; this only happens in a broken environment
+        raise RanadError("the flat prior needs pyoidn (pip install pyoidn)", "pyoidn") from e
+    aux = {}
+    if albedo is not None:
+        aux["albedo"] = albedo
+        if normal is not None:
+            aux["normal"] = normal
+    return np.asarray(pyoidn.denoise(colour, hdr=True, **aux), np.float32)
+
+
+def flat_images(srt: DeepImage, rgb: np.ndarray, guides: bool) -> tuple[np.ndarray, np.ndarray]:
+    """(noisy flattened beauty [P, 3], OIDN's denoised one [P, 3]) of a sorted image with per-bin beauty `rgb`.
+    OIDN sees the colour divided by the frame's exposure scale (so its output, too, scales with the input)."""
+    h, w = srt.height, srt.width
+    flat = _flat(srt, np.maximum(np.nan_to_num(rgb, nan=0.0, posinf=0.0), 0), True)
+    if srt.num_bins == 0 or h * w == 0:
+        return flat, flat.copy()
+    s = exposure_scale(flat)
+    img = lambda x: np.ascontiguousarray(x.reshape(h, w, 3), np.float32)  # noqa: E731
+    albedo = normal = None
+    if guides and all(c in srt.channels for names in AUX for c in names):
+        albedo = img(np.clip(_flat(srt, np.stack([srt.channel(c) for c in AUX[0]], 1), False), 0, 1))
+        normal = img(np.clip(_flat(srt, np.stack([srt.channel(c) for c in AUX[1]], 1), False), -1, 1))
+    den = _oidn(img(flat / s), albedo, normal).reshape(-1, 3) * s
+    return flat, np.maximum(np.nan_to_num(den, nan=0.0, posinf=0.0), 0)
+
+
+def with_prior(img: DeepImage, residual: np.ndarray | None = None, both: bool = False) -> DeepImage:
+    """`img` (any bin order) plus the per-bin channels of the flat prior and the flattened noisy beauty (channels.py
+    PRIOR and FLAT_NOISY); `both` also adds the prior computed without guides (PRIOR_NOAUX, for training)."""
+    srt, perm = img.sorted()
+    rgb = beauty(img, residual)[perm]
+    pix = srt.pixel_index()
+    flat, den = flat_images(srt, rgb, guides=True)
+    cols = [den[pix], flat[pix]]
+    names = list(PRIOR) + list(FLAT_NOISY)
+    if both:
+        has_aux = all(c in srt.channels for names_ in AUX for c in names_)
+        cols.append(flat_images(srt, rgb, guides=False)[1][pix] if has_aux else den[pix])
+        names += list(PRIOR_NOAUX)
+    extra = np.concatenate(cols, 1).astype(np.float32)
+    from ..deep import unsort
+
+    extra = unsort(extra, perm)  # back to the image's own bin order
+    types = {**img.channel_types, **{n: "float" for n in names}}
+    return DeepImage(values=np.concatenate([img.values, extra], 1), offsets=img.offsets,
+                     channels=list(img.channels) + names, ids=img.ids, data_window=img.data_window,
+                     display_window=img.display_window, channel_types=types, header=img.header)
+
+
+def frame_scale(img: DeepImage) -> float:
+    """The exposure scale of an image that carries FLAT_NOISY channels (with_prior), from its pixels' flattened
+    noisy beauty (each covered pixel counted once)."""
+    if img.num_bins == 0:
+        return 1.0
+    starts = img.offsets[:-1][np.diff(img.offsets) > 0]
+    flat = np.stack([img.channel(c) for c in FLAT_NOISY], 1)[starts]
+    return exposure_scale(flat)
