@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import glob
 import os
 import shutil
 
@@ -14,9 +13,10 @@ from deep_factory import assert_same_deep, random_deep, write_bad_compression, w
 from ranad_core.errors import RanadError
 from ranad_core.exr import fast, read_deep, read_layout, write_deep
 from ranad_core.exr.header import parse_layout
+from real_data import BUNDLED_FILES, DATA, bundled, bundled_deep_files, shared, shared_params, write_small_flat
 
-REAL = os.path.join(os.path.dirname(__file__), "..", "..", "shared", "data", "deep-real")
-REAL_FILES = sorted(f for f in glob.glob(os.path.join(REAL, "*.exr")) if "composited" not in f)
+# every real deep file: the bundled ones always, the larger ../shared ones when that folder is beside the project
+REAL_FILES = [pytest.param(p, id=os.path.basename(p)) for p in bundled_deep_files()] + shared_params()
 
 
 def _deep_parts(path):
@@ -25,10 +25,15 @@ def _deep_parts(path):
 
 
 def test_real_data_present():
-    assert len(REAL_FILES) >= 11, f"expected the shared deep-real files under {REAL}"
+    """The bundled real files are in the checkout, credited in tests/data/README.md, and deep."""
+    credits = (DATA / "README.md").read_text()
+    for name in BUNDLED_FILES:
+        assert f"`{name}`" in credits, f"{name} is not credited in tests/data/README.md"
+    for path in bundled_deep_files():
+        assert _deep_parts(path) == [0], path
 
 
-@pytest.mark.parametrize("path", REAL_FILES, ids=os.path.basename)
+@pytest.mark.parametrize("path", REAL_FILES)
 def test_real_files_bit_exact_against_openimageio(path):
     for part in _deep_parts(path):
         ours = read_deep(path, part=part, io="fast")
@@ -39,7 +44,7 @@ def test_real_files_bit_exact_against_openimageio(path):
         assert ours.display_window == theirs.display_window
 
 
-@pytest.mark.parametrize("path", REAL_FILES, ids=os.path.basename)
+@pytest.mark.parametrize("path", REAL_FILES)
 def test_real_files_round_trip(path, tmp_path):
     src = read_deep(path, io="fast")
     out = tmp_path / "rt.exr"
@@ -147,8 +152,59 @@ def test_deep_tiles_written_by_openimageio(tmp_path, tile):
     assert_same_deep(read_deep(path, io="oiio"), img)
 
 
+def test_multipart_written_by_openimageio(tmp_path):
+    """A two-part deep file written by OpenImageIO (different data windows, ids in one part only): each part
+    reads back by index and by name, through both I/O paths; part 0 is the default."""
+    import OpenImageIO as oiio
+
+    imgs = {"left": random_deep(width=9, height=5, seed=1, ids=()),
+            "right": random_deep(width=7, height=4, seed=2, origin=(2, 3), ids=("id",))}
+    specs = []
+    for name, img in imgs.items():
+        names = img.channels + list(img.ids)
+        spec = oiio.ImageSpec(img.width, img.height, len(names), oiio.FLOAT)
+        spec.channelnames = tuple(names)
+        spec.channelformats = tuple(oiio.TypeDesc(img.channel_types[n]) for n in names)
+        spec.x, spec.y = img.data_window[:2]
+        spec.full_x, spec.full_y, spec.full_width, spec.full_height = 0, 0, 16, 10   # one display window
+        spec.deep = True
+        spec.attribute("compression", "zips")
+        spec.attribute("name", name)
+        specs.append(spec)
+    path = str(tmp_path / "two_parts.exr")
+    out = oiio.ImageOutput.create(path)
+    assert out.open(path, specs), out.geterror()
+    for k, (spec, img) in enumerate(zip(specs, imgs.values())):
+        if k:
+            assert out.open(path, spec, "AppendSubimage"), out.geterror()
+        dd = oiio.DeepData()
+        dd.init(img.num_pixels, len(spec.channelnames), spec.channelformats, spec.channelnames)
+        for p in range(img.num_pixels):
+            dd.set_samples(p, int(img.counts[p]))
+        for p in range(img.num_pixels):
+            for s in range(img.counts[p]):
+                b = img.offsets[p] + s
+                for j in range(len(img.channels)):
+                    dd.set_deep_value(p, j, s, float(img.values[b, j]))
+                for j, idn in enumerate(img.ids):
+                    dd.set_deep_value_uint(p, len(img.channels) + j, s, int(img.ids[idn][b]))
+        assert out.write_deep_image(dd), out.geterror()
+    out.close()
+    for k, (name, img) in enumerate(imgs.items()):
+        for io in ("fast", "oiio"):
+            assert_same_deep(read_deep(path, part=k, io=io), img)
+        by_name = read_deep(path, part=name)
+        assert_same_deep(by_name, img)
+        assert by_name.header["name"].value() == name and by_name.display_window == (0, 0, 15, 9)
+    assert read_deep(path).header["name"].value() == "left"
+    with pytest.raises(RanadError, match="no part named 'centre'"):
+        read_deep(path, part="centre")
+    with pytest.raises(RanadError, match="no part 2"):
+        read_deep(path, part=2)
+
+
 def test_multipart_by_index_and_name():
-    path = os.path.join(REAL, "Stereo_Trunks.exr")
+    path = shared("Stereo_Trunks.exr")
     right = read_deep(path, part="rgba.right")
     assert right.data_window == read_deep(path, part=1).data_window == (0, 266, 1882, 1079)
     assert read_deep(path).header["name"].value() == "rgba.left"
@@ -159,7 +215,7 @@ def test_multipart_by_index_and_name():
 
 
 def test_channel_subset():
-    path = os.path.join(REAL, "openexr_test_42.deep.exr")
+    path = bundled("openexr_test_42.deep.exr")
     full = read_deep(path)
     sub = read_deep(path, channels=["R", "Z", "modelid"])
     assert sub.channels == ["R", "Z"] and list(sub.ids) == ["modelid"]
@@ -170,7 +226,7 @@ def test_channel_subset():
 
 
 def test_deep_image_state_reflects_what_is_written(tmp_path):
-    src = read_deep(os.path.join(REAL, "openexr_test_42.deep.exr"))
+    src = read_deep(bundled("openexr_test_42.deep.exr"))
     assert src.header["deepImageState"].value() == 3
     # reverse every pixel's bins: no longer sorted, so the state written must say so
     perm = np.concatenate([np.arange(src.offsets[p + 1] - 1, src.offsets[p] - 1, -1)
@@ -193,9 +249,16 @@ def test_not_an_exr(tmp_path):
     assert str(p) in str(e.value)
 
 
-def test_flat_exr_is_refused():
+def test_flat_exr_is_refused(tmp_path):
+    flat = write_small_flat(tmp_path / "flat.exr")
+    with pytest.raises(RanadError, match="not a deep image") as e:
+        read_deep(flat)
+    assert str(flat) in str(e.value)
+
+
+def test_flat_exr_from_openexr_images_is_refused():
     with pytest.raises(RanadError, match="not a deep image"):
-        read_deep(os.path.join(REAL, "LowResLeftView_composited.exr"))
+        read_deep(shared("LowResLeftView_composited.exr"))
 
 
 def test_missing_file(tmp_path):
@@ -205,7 +268,7 @@ def test_missing_file(tmp_path):
 
 @pytest.mark.parametrize("keep", [0.3, 0.9, 0.999])
 def test_truncated_file(tmp_path, keep):
-    src = os.path.join(REAL, "openexr_test_11.deep.exr")
+    src = bundled("openexr_test_11.deep.exr")
     data = open(src, "rb").read()
     p = tmp_path / "cut.exr"
     p.write_bytes(data[: int(len(data) * keep)])
@@ -215,14 +278,14 @@ def test_truncated_file(tmp_path, keep):
 
 def test_corrupt_chunk(tmp_path):
     p = tmp_path / "corrupt.exr"
-    write_corrupt_chunk(os.path.join(REAL, "openexr_test_42.deep.exr"), p, line=128)
+    write_corrupt_chunk(bundled("openexr_test_42.deep.exr"), p, line=128)
     with pytest.raises(RanadError, match=r"corrupt chunk \(scan line 128"):
         read_deep(p, io="fast")
 
 
 def test_unknown_compression_is_refused(tmp_path):
     p = tmp_path / "badcomp.exr"
-    write_bad_compression(os.path.join(REAL, "openexr_test_11.deep.exr"), p)
+    write_bad_compression(bundled("openexr_test_11.deep.exr"), p)
     with pytest.raises(RanadError, match="compression"):
         read_deep(p)
 
@@ -253,5 +316,5 @@ def test_write_refuses_unknown_compression(tmp_path):
 
 def test_copy_of_real_file_with_unicode_name(tmp_path):
     p = tmp_path / "plan_é.exr"
-    shutil.copy(os.path.join(REAL, "openexr_test_11.deep.exr"), p)
+    shutil.copy(bundled("openexr_test_11.deep.exr"), p)
     assert read_deep(p).num_bins == 6056
