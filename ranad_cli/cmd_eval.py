@@ -31,7 +31,14 @@ from .params import int_list
 @click.option("--window", default=None, type=click.IntRange(2, 7),
               help="Frames per window of the cross-frame model in --temporal (default: the window it was trained "
                    "with).")
-def eval_cmd(dataset, out, model, spp, kinds, scenes, grid_pairs, temporal, cross_model, window):
+@click.option("--held-out", "held_out", default="",
+              help="Scene families (synth presets) the model never trained on, comma-separated: their scenes are "
+                   "reported apart from in-family ones (the numbers to steer by).")
+@click.option("--exposure", "exposures", default="0", show_default=True,
+              help="Exposure sweep: stops by which every input is scaled (comma-separated, e.g. -6,0,6); outputs "
+                   "are scaled back before scoring, so rows at different exposures compare directly.")
+def eval_cmd(dataset, out, model, spp, kinds, scenes, grid_pairs, temporal, cross_model, window, held_out,
+             exposures):
     """Evaluate on DATASET (the output of `ranad synth` with other seeds than the training data): for every
     scene, deep kind and spp, the noisy input, flat OIDN, OIDN then recolour (the studio workflow) and ranad
     are scored against the reference: SMAPE, DSSIM and HDR-FLIP of the flattened beauty; per-bin SMAPE; a
@@ -46,7 +53,12 @@ def eval_cmd(dataset, out, model, spp, kinds, scenes, grid_pairs, temporal, cros
     loaded = load_model(model)
     if temporal:
         return _temporal(dataset, out, loaded, cross_model, spps, kinds, scenes, window)
-    total = ev.count_pairs(dataset, spps, kinds, scenes)
+    try:
+        stops = tuple(float(x) for x in exposures.split(",") if x.strip())
+    except ValueError:
+        raise click.BadParameter(f"not a list of numbers: {exposures!r}", param_hint="--exposure") from None
+    held = tuple(x.strip() for x in held_out.split(",") if x.strip())
+    total = ev.count_pairs(dataset, spps, kinds, scenes) * len(stops)
     if total == 0:
         raise RanadError("no pairs match the --spp/--kind selection", dataset)
     try:
@@ -54,9 +66,14 @@ def eval_cmd(dataset, out, model, spp, kinds, scenes, grid_pairs, temporal, cros
     except OSError as e:
         raise RanadError(f"cannot create the output folder ({e.strerror or e})", out) from None
     with tqdm(total=total, desc="eval", unit="pair") as bar:
-        result = ev.evaluate(dataset, loaded.model, spps, kinds, scenes, grid_pairs, bar.update)
-    table = ev.markdown(result.rows, f"{loaded.model_id} on {os.path.basename(os.path.normpath(dataset))}, "
-                                     f"{len({r['scene'] for r in result.rows})} scenes")
+        result = ev.evaluate(dataset, loaded.model, spps, kinds, scenes, grid_pairs, bar.update, stops, held)
+    name = os.path.basename(os.path.normpath(dataset))
+    n_scenes = len({r["scene"] for r in result.rows})
+    if held or stops != (0,):
+        table = ev.grouped_markdown(result.rows, f"{loaded.model_id} on {name}, {n_scenes} scenes"
+                                                 + (f", held-out families {', '.join(held)}" if held else ""))
+    else:
+        table = ev.markdown(result.rows, f"{loaded.model_id} on {name}, {n_scenes} scenes")
     from ranad_core.fileutil import atomic_output
 
     with atomic_output(os.path.join(out, "eval.md")) as tmp:

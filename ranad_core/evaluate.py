@@ -26,7 +26,43 @@ from .train.data import find_pairs
 METHODS = ("noisy", "oidn", "recolour", "ranad")
 FLAT = ("smape", "dssim", "flip")
 DEEP = ("bin_smape", "z_rel", "comp_flip", "comp_smape", "sep_smape", "sep_dssim")
-COLUMNS = ("scene", "kind", "spp", "method", *FLAT, *DEEP, "seconds")
+COLUMNS = ("scene", "family", "group", "exposure", "kind", "spp", "method", *FLAT, *DEEP, "seconds")
+
+
+def radiance_channels(channels) -> list:
+    """The channels an exposure change scales: the beauty, every premultiplied colour layer and light group
+    (not alpha, depth, albedo, normals, positions, motion, coverage or ids)."""
+    from .channels import ALIASES
+
+    colour = {a for k in ("diffuse", "specular", "emission") for a in ALIASES[k]}
+    out = []
+    for c in channels:
+        layer, _, comp = c.rpartition(".")
+        if c in ("R", "G", "B") or (comp in ("R", "G", "B", "r", "g", "b") and
+                                    (layer in colour or layer.startswith("lg_"))):
+            out.append(c)
+    return out
+
+
+def exposed(img, stops: float):
+    """`img` with its radiance channels scaled by 2^stops (exact in float for whole stops)."""
+    if not stops:
+        return img
+    vals = img.values.copy()
+    for c in radiance_channels(img.channels):
+        vals[:, img.channels.index(c)] *= np.float32(2.0 ** stops)
+    return img.with_values(vals)
+
+
+def scene_family(pair) -> str:
+    """The scene family (synth preset) of a pair, from its scene's manifest."""
+    import json
+
+    manifest = pair.noisy.parent.parent / "manifest.json"
+    try:
+        return json.loads(manifest.read_text()).get("preset", "?")
+    except (OSError, ValueError):
+        return "?"
 
 
 @dataclass
@@ -38,15 +74,22 @@ class Result:
 
 
 def evaluate(dataset: str, model, spps=None, kinds=None, max_scenes: int | None = None, grid_pairs: int = 4,
-             progress=None) -> Result:
-    """Scores every selected pair; `model` is a RaNAD in eval mode."""
+             progress=None, exposures=(0,), held_out=()) -> Result:
+    """Scores every selected pair; `model` is a RaNAD in eval mode.
+
+    exposures: stops by which each noisy input is scaled before every method runs; the outputs are scaled back
+    before scoring against the unscaled reference, so each row says how well a method does on the same scene
+    rendered brighter or darker. held_out: scene families (synth presets) the model never trained on; rows get
+    group "held-out" for them and "in-family" otherwise (the generalization protocol)."""
     pairs = [p for p in find_pairs(dataset) if (not spps or p.spp in spps) and (not kinds or p.kind in kinds)]
     if max_scenes:
         keep = sorted({p.scene for p in pairs})[:max_scenes]
         pairs = [p for p in pairs if p.scene in keep]
     result = Result()
-    for pair in pairs:
-        noisy, ref = read_deep(pair.noisy), read_deep(pair.reference)
+    for pair, stops in ((p, e) for p in pairs for e in exposures):
+        family = scene_family(pair)
+        group = "held-out" if family in held_out else "in-family"
+        noisy, ref = exposed(read_deep(pair.noisy), stops), read_deep(pair.reference)
         z = metrics.split_depth(ref)
         flat_ref = metrics.flat_rgb(ref)
         outputs, seconds = {}, {}
@@ -60,12 +103,16 @@ def evaluate(dataset: str, model, spps=None, kinds=None, max_scenes: int | None 
         outputs["ranad"] = denoise_frame(model, noisy).image
         seconds["ranad"] = time.perf_counter() - t
         outputs["noisy"], seconds["noisy"] = noisy, 0.0
+        if stops:  # back to the reference's exposure
+            outputs = {k: v * np.float32(2.0 ** -stops) if isinstance(v, np.ndarray) else exposed(v, -stops)
+                       for k, v in outputs.items()}
         flats = {}
         for method in METHODS:
             out = outputs[method]
             deep = not isinstance(out, np.ndarray)
             flats[method] = metrics.flat_rgb(out) if deep else out
-            row = {"scene": pair.scene, "kind": pair.kind, "spp": pair.spp, "method": method,
+            row = {"scene": pair.scene, "family": family, "group": group, "exposure": stops, "kind": pair.kind,
+                   "spp": pair.spp, "method": method,
                    **metrics.flat_scores(flat_ref, flats[method]),
                    **(metrics.deep_scores(ref, out, z) if deep else dict.fromkeys(DEEP, math.nan)),
                    "seconds": seconds[method]}
@@ -73,7 +120,7 @@ def evaluate(dataset: str, model, spps=None, kinds=None, max_scenes: int | None 
         if len(result.grid) < grid_pairs:
             edits = [metrics.composite_edit(metrics.with_depths_of(x, ref), z)
                      for x in (outputs["recolour"], outputs["ranad"], ref)]
-            result.grid.append((f"{pair.scene} {pair.kind} {pair.spp} spp",
+            result.grid.append((f"{pair.scene} ({family}) {pair.kind} {pair.spp} spp {stops:+g} stops",
                                 [flats[m] for m in METHODS] + [flat_ref] + edits))
         if progress:
             progress(1)
@@ -117,6 +164,46 @@ def markdown(rows: list, title: str = "") -> str:
                                                       "|" + "---|" * len(cols)]
     lines += ["| " + " | ".join(_fmt(r[c]) for c in cols) + " |" for r in s]
     return "\n".join(lines) + "\n"
+
+
+def groups(rows: list) -> list:
+    """(group, exposure, kind) keys present in rows, held-out first (the numbers to steer by)."""
+    order = {"held-out": 0, "in-family": 1}
+    keys = {(r.get("group", "in-family"), r.get("exposure", 0), r["kind"]) for r in rows}
+    return sorted(keys, key=lambda k: (order.get(k[0], 2), k[1], k[2]))
+
+
+def ratios(rows: list) -> list:
+    """Per (group, exposure, kind, spp): ranad's flat FLIP / OIDN's and its edit FLIP / OIDN+recolour's (the
+    issue's targets), means over scenes taken first."""
+    out = []
+    for g, e, kind in groups(rows):
+        sel = [r for r in rows if (r.get("group", "in-family"), r.get("exposure", 0), r["kind"]) == (g, e, kind)]
+        by = {(r["spp"], r["method"]): r for r in summary(sel)}
+        for spp in sorted({r["spp"] for r in sel}):
+            if (spp, "ranad") in by and (spp, "oidn") in by:
+                out.append({"group": g, "exposure": f"{e:+g}", "kind": kind, "spp": spp,
+                            "n": by[(spp, "ranad")]["n"],
+                            "flip_vs_oidn": by[(spp, "ranad")]["flip"] / by[(spp, "oidn")]["flip"],
+                            "edit_vs_recolour": by[(spp, "ranad")]["comp_flip"] / by[(spp, "recolour")]["comp_flip"]})
+    return out
+
+
+def grouped_markdown(rows: list, title: str = "") -> str:
+    """One summary table per (group, exposure, kind), then the ratio table."""
+    parts = [f"## {title}", ""] if title else []
+    for g, e, kind in groups(rows):
+        sel = [r for r in rows if (r.get("group", "in-family"), r.get("exposure", 0), r["kind"]) == (g, e, kind)]
+        fams = ", ".join(sorted({r.get("family", "?") for r in sel}))
+        parts.append(markdown(sel, f"{g} ({fams}), {kind}, exposure {e:+g} stops, "
+                                   f"{len({r['scene'] for r in sel})} scenes"))
+    rt = ratios(rows)
+    if rt:
+        cols = ("group", "exposure", "kind", "spp", "n", "flip_vs_oidn", "edit_vs_recolour")
+        parts += ["### ranad / baseline (flat FLIP vs OIDN, edit FLIP vs OIDN+recolour; < 1: ranad better)", "",
+                  "| " + " | ".join(cols) + " |", "|" + "---|" * len(cols)]
+        parts += ["| " + " | ".join(_fmt(r[c]) for c in cols) + " |" for r in rt]
+    return "\n".join(parts) + "\n"
 
 
 def write_csv(rows: list, path: str, columns=COLUMNS) -> None:

@@ -1,0 +1,47 @@
+"""The generalization protocol of `ranad eval` (issue 24): the exposure sweep scales exactly the radiance channels,
+held-out families are reported apart, and the ratio table divides the right means."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from ranad_core.deep import DeepImage
+from ranad_core.evaluate import exposed, grouped_markdown, radiance_channels, ratios
+
+
+def test_exposure_scales_radiance_only():
+    chans = ["R", "G", "B", "A", "Z", "ZBack", "diffuse.R", "diffuse.G", "diffuse.B", "albedo.R", "N.X",
+             "lg_key.R", "motion_prev.X", "coverage", "specular.B", "emission.G"]
+    assert radiance_channels(chans) == ["R", "G", "B", "diffuse.R", "diffuse.G", "diffuse.B", "lg_key.R",
+                                        "specular.B", "emission.G"]
+    rng = np.random.default_rng(0)
+    img = DeepImage(values=rng.random((5, len(chans))).astype(np.float32), offsets=np.array([0, 2, 5]),
+                    channels=chans, data_window=(0, 0, 1, 0))
+    up = exposed(img, 3)
+    scale = np.array([8.0 if c in radiance_channels(chans) else 1.0 for c in chans], np.float32)
+    np.testing.assert_array_equal(up.values, img.values * scale)
+    np.testing.assert_array_equal(exposed(up, -3).values, img.values)
+
+
+def _rows():
+    rows = []
+    for group, fam, ranad_flip in (("held-out", "glass", 0.08), ("in-family", "easy", 0.05)):
+        for scene, mult in (("a", 1.0), ("b", 3.0)):
+            for method, flip, comp in (("noisy", 0.2, 0.1), ("oidn", 0.1, float("nan")), ("recolour", 0.1, 0.06),
+                                       ("ranad", ranad_flip, 0.03)):
+                rows.append({"scene": f"{scene}{group}", "family": fam, "group": group, "exposure": 0,
+                             "kind": "deepz", "spp": 16, "method": method, "flip": flip * mult,
+                             "smape": 0.0, "dssim": 0.0, "bin_smape": 0.0, "z_rel": 0.0, "comp_flip": comp * mult,
+                             "comp_smape": 0.0, "sep_smape": 0.0, "sep_dssim": 0.0, "seconds": 0.0})
+    return rows
+
+
+def test_ratios_per_group():
+    rt = {r["group"]: r for r in ratios(_rows())}
+    assert rt["held-out"]["flip_vs_oidn"] == pytest.approx(0.8)
+    assert rt["in-family"]["flip_vs_oidn"] == pytest.approx(0.5)
+    assert rt["held-out"]["edit_vs_recolour"] == pytest.approx(0.5)
+    text = grouped_markdown(_rows(), "t")
+    assert text.index("held-out (glass)") < text.index("in-family (easy)")
+    assert "| held-out | +0 | deepz | 16 | 2 | 0.8000 | 0.5000 |" in text
