@@ -186,7 +186,7 @@ def test_consecutive_frames_share_one_crop(tmp_path):
     assert [(a.noisy.name, b.noisy.name) for a, b in found] == [
         ("noisy_spp16.0000.exr", "noisy_spp16.0001.exr"), ("noisy_spp16.0001.exr", "noisy_spp16.0002.exr")]
     assert find_frame_pairs(dataset_from_example(tmp_path / "centre_only")) == []
-    (f0, r0, c0), (f1, r1, c1) = sample_consecutive(found[0], np.random.default_rng(3), 24, 3)
+    (f0, r0, c0, _), (f1, r1, c1, _) = sample_consecutive(found[0], np.random.default_rng(3), 24, 3)
     assert (len(f0), c0, len(f1), c1) == (2, 0, 3, 1)  # frame 0 sits at the sequence's start
     for frames, ref, c in ((f0, r0, c0), (f1, r1, c1)):
         assert all((f.width, f.height) == (24, 24) for f in frames)

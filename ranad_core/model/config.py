@@ -73,6 +73,8 @@ CONFIGS["cpu-small-xfm"] = ModelConfig(**{**CONFIGS["cpu-small-xf"].__dict__, "n
 
 # cpu-small reading exposure-normalised radiance and OIDN's flat prior (inputs.py, prior.py); issue 24
 CONFIGS["cpu-small-p"] = ModelConfig(**{**CONFIGS["cpu-small"].__dict__, "name": "cpu-small-p", "features": "prior"})
+CONFIGS["cpu-small-p-xf"] = ModelConfig(**{**CONFIGS["cpu-small-xf"].__dict__, "name": "cpu-small-p-xf",
+                                          "features": "prior"})
 
 
 def get_config(name: str) -> ModelConfig:

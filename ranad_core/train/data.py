@@ -227,16 +227,28 @@ def window_frames(pair: Pair, offsets) -> list:
 
 
 @lru_cache(maxsize=32)
-def compensated(pair: Pair, lo: int, hi: int) -> tuple:
+def compensated(pair: Pair, lo: int, hi: int, features: str = "log1p") -> tuple:
     """(the noisy frames centre+lo .. centre+hi moved onto the centre frame with bins sorted front to back, the
-    centre's index, the centre frame's sort permutation)."""
+    centre's index, the centre frame's sort permutation, each frame's whole-frame FrameContext). For the "prior"
+    feature set every moved frame carries its flat prior, computed as `ranad denoise` does on the compensated
+    frame."""
     from ..motion import compensate
 
     frames = [load(p) for p in window_frames(pair, range(lo, hi + 1))]
     centre = -lo
     moved, _ = compensate(frames, centre)
     done = [f.sorted() for f in moved]
-    return tuple(f for f, _ in done), centre, done[centre][1]
+    out, ctxs = [], []
+    for f, _ in done:
+        if features == "prior":
+            from ..model.prior import frame_scale, with_prior
+
+            f = with_prior(f, both=True)
+        from ..model.inputs import depth_stats
+
+        ctxs.append(FrameContext(depth_stats(f), frame_scale(f) if features == "prior" else 1.0))
+        out.append(f)
+    return tuple(out), centre, done[centre][1], tuple(ctxs)
 
 
 def available_window(pair: Pair, window: int) -> tuple:
@@ -246,36 +258,38 @@ def available_window(pair: Pair, window: int) -> tuple:
     return min(have), max(have)
 
 
-def window_with_reference(pair: Pair, lo: int, hi: int) -> tuple:
+def window_with_reference(pair: Pair, lo: int, hi: int, features: str = "log1p") -> tuple:
     """(the compensated frames centre+lo .. centre+hi, the reference in the centre frame's sorted order, the
-    centre's index)."""
-    frames, centre, perm = compensated(pair, lo, hi)
+    centre's index, the frames' whole-frame contexts)."""
+    frames, centre, perm, ctxs = compensated(pair, lo, hi, features)
     ref = load(pair.reference)
-    return frames, gather_bins(ref, perm, ref.offsets), centre
+    return frames, gather_bins(ref, perm, ref.offsets), centre, ctxs
 
 
 def cropped(windows: list, rng: np.random.Generator, crop: int) -> list:
-    """The windows (frames, reference, centre) cut to one random crop with one random flip/transpose."""
+    """The windows (frames, reference, centre, contexts) cut to one random crop with one random flip/transpose."""
     win = random_window(windows[0][1], rng, crop)
     fx, fy, tr = (bool(b) for b in rng.integers(0, 2, 3))
-    return [([transform(f.crop(win), fx, fy, tr) for f in frames], transform(ref.crop(win), fx, fy, tr), centre)
-            for frames, ref, centre in windows]
+    return [([transform(f.crop(win), fx, fy, tr) for f in frames], transform(ref.crop(win), fx, fy, tr), centre,
+             ctxs) for frames, ref, centre, ctxs in windows]
 
 
-def sample_window(pair: Pair, rng: np.random.Generator, crop: int, window: int) -> tuple:
-    """(noisy crops of a window of frames, the reference crop, the centre's index): windows up to `window`
-    frames around the centre, shortened at random as at a sequence's ends, the same crop and flip for all."""
+def sample_window(pair: Pair, rng: np.random.Generator, crop: int, window: int, features: str = "log1p") -> tuple:
+    """(noisy crops of a window of frames, the reference crop, the centre's index, the frames' whole-frame
+    contexts): windows up to `window` frames around the centre, shortened at random as at a sequence's ends, the
+    same crop and flip for all."""
     lo_all, hi_all = available_window(pair, window)
     r = rng.random()
     lo, hi = (lo_all, hi_all) if r < 0.6 else ((lo_all, 0) if r < 0.75 else ((0, hi_all) if r < 0.9 else (0, 0)))
-    return cropped([window_with_reference(pair, lo, hi)], rng, crop)[0]
+    return cropped([window_with_reference(pair, lo, hi, features)], rng, crop)[0]
 
 
-def sample_consecutive(pairs: tuple, rng: np.random.Generator, crop: int, window: int) -> list:
+def sample_consecutive(pairs: tuple, rng: np.random.Generator, crop: int, window: int,
+                       features: str = "log1p") -> list:
     """For two consecutive frames (find_frame_pairs): each frame's window (every frame up to `window` around it that
-    exists, as `ranad denoise` uses them), its reference and its centre index, with one crop and one
-    flip/transpose for both, so their flattened results can be compared pixel for pixel."""
-    return cropped([window_with_reference(p, *available_window(p, window)) for p in pairs], rng, crop)
+    exists, as `ranad denoise` uses them), its reference, its centre index and the frames' contexts, with one crop
+    and one flip/transpose for both, so their flattened results can be compared pixel for pixel."""
+    return cropped([window_with_reference(p, *available_window(p, window), features) for p in pairs], rng, crop)
 
 
 def reduce_window(frames: list, ref: DeepImage, rng: np.random.Generator, p_no_aux: float,

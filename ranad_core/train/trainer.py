@@ -160,13 +160,14 @@ def init_single(model, init_name: str) -> None:
 def pair_loss(net, pair, rng: np.random.Generator, cfg: TrainConfig, cross: bool):
     """(loss, parts) of one training crop of `pair` (its frame's window for cross-frame models); None for a crop
     without bins."""
+    features = unwrap(net).config.features
     if cross:
-        frames, ref_img, centre = sample_window(pair, rng, cfg.crop, cfg.window)
+        frames, ref_img, centre, ctxs = sample_window(pair, rng, cfg.crop, cfg.window, features)
         frames, ref_img = reduce_window(frames, ref_img, rng, cfg.p_no_aux, cfg.p_no_split)
-        window = [prepare(f) for f in frames]
+        window = [prepare(f, c.z_stats, features, c.scale) for f, c in zip(frames, ctxs)]
         noisy, ref = window[centre], prepare(ref_img)
+        scale = ctxs[centre].scale
     else:
-        features = unwrap(net).config.features
         ctx = frame_context(pair.noisy, features)
         noisy_img, ref_img = reduce_inputs(*sample(pair, rng, cfg.crop, features), rng, cfg.p_no_aux,
                                            cfg.p_no_split)
@@ -177,7 +178,7 @@ def pair_loss(net, pair, rng: np.random.Generator, cfg: TrainConfig, cross: bool
     if noisy.layout.bins == 0:
         return None
     pred = net(window, centre)
-    return total_loss(pred, ref.layers, noisy.layout.offsets, noisy.layout.size)
+    return total_loss(pred, ref.layers, noisy.layout.offsets, noisy.layout.size, scale)
 
 
 def consecutive_loss(net, pairs: tuple, rng: np.random.Generator, cfg: TrainConfig):
@@ -185,20 +186,23 @@ def consecutive_loss(net, pairs: tuple, rng: np.random.Generator, cfg: TrainConf
     the mean of their losses plus temporal_weight x the temporal loss; None when a crop has no bins."""
     no_aux, no_split = rng.random() < cfg.p_no_aux, rng.random() < cfg.p_no_split  # the same for both frames
     inputs = []
-    for frames, ref_img, centre in sample_consecutive(pairs, rng, cfg.crop, cfg.window):
+    features = unwrap(net).config.features
+    for frames, ref_img, centre, ctxs in sample_consecutive(pairs, rng, cfg.crop, cfg.window, features):
         frames, ref_img = reduce_window(frames, ref_img, rng, float(no_aux), float(no_split))
-        window = [prepare(f) for f in frames]
+        window = [prepare(f, c.z_stats, features, c.scale) for f, c in zip(frames, ctxs)]
         if window[centre].layout.bins == 0:
             return None
-        inputs.append((window, centre, prepare(ref_img)))
+        inputs.append((window, centre, prepare(ref_img), ctxs[centre].scale))
     preds, losses, parts = [], [], {}
-    for window, centre, ref in inputs:
+    for window, centre, ref, scale in inputs:
         preds.append(net(window, centre))
-        loss, p = total_loss(preds[-1], ref.layers, window[centre].layout.offsets, window[centre].layout.size)
+        loss, p = total_loss(preds[-1], ref.layers, window[centre].layout.offsets, window[centre].layout.size,
+                             scale)
         losses.append(loss)
         for k, v in p.items():
             parts[k] = parts.get(k, 0.0) + v / len(inputs)
-    t = temporal_loss(preds, [ref.layers for _, _, ref in inputs], [w[c].layout.offsets for w, c, _ in inputs])
+    t = temporal_loss(preds, [ref.layers for _, _, ref, _ in inputs],
+                      [w[c].layout.offsets for w, c, _, _ in inputs])
     parts["temporal"] = t.item()
     return sum(losses) / len(losses) + cfg.temporal_weight * t, parts
 
