@@ -38,7 +38,7 @@ def oidn_flat(noisy: DeepImage) -> np.ndarray:
     try:
         import pyoidn
     except ImportError as e:
-        raise RanadError("the OIDN baseline needs pyoidn (pip install 'ranad[eval]')", "pyoidn") from e
+        raise RanadError("the OIDN baseline needs pyoidn (pip install pyoidn)", "pyoidn") from e
     srt, _ = noisy.sorted()
     h, w = noisy.height, noisy.width
     shape = lambda x: np.ascontiguousarray(x.reshape(h, w, 3), np.float32)  # noqa: E731
