@@ -38,7 +38,10 @@ def atomic_output(path: str | os.PathLike, suffix: str | None = None) -> Iterato
     folder = os.path.dirname(os.path.abspath(path))
     if suffix is None:
         suffix = os.path.splitext(path)[1]
-    fd, tmp = tempfile.mkstemp(prefix="." + os.path.basename(path) + ".", suffix=".tmp" + suffix, dir=folder)
+    try:  # the permission bits are not the whole story (root, read-only or special file systems, ACLs)
+        fd, tmp = tempfile.mkstemp(prefix="." + os.path.basename(path) + ".", suffix=".tmp" + suffix, dir=folder)
+    except OSError as e:
+        raise RanadError(f"cannot write in the output folder ({e.strerror or e})", path) from None
     os.close(fd)
     try:
         yield tmp

@@ -4,7 +4,9 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import shutil
+import stat
 import subprocess
 import sys
 
@@ -14,13 +16,12 @@ from click.testing import CliRunner
 
 from deep_factory import random_deep, write_bad_compression, write_corrupt_chunk
 from ranad_cli.main import cli
-from ranad_core.exr import read_deep, write_deep
+from ranad_core import __version__
+from ranad_core.exr import write_deep
 from ranad_core.exr.flat import read_flat
+from real_data import bundled, bundled_deep_files, shared, write_small_flat
 
-REAL = os.path.join(os.path.dirname(__file__), "..", "..", "shared", "data", "deep-real")
-OBJECTID = os.path.join(REAL, "openexr_test_objectid.deep.exr")
-STEREO = os.path.join(REAL, "Stereo_Trunks.exr")
-FLAT = os.path.join(REAL, "LowResLeftView_composited.exr")
+OBJECTID = bundled("objectid.deep.exr")
 
 
 def run(*args):
@@ -41,12 +42,12 @@ def test_info_text():
     assert "256x256" in r.output and "id channels: id, particleid" in r.output
     assert "deepImageState: tidy" in r.output and "id manifest: yes" in r.output
     assert "deep-Z" in r.output  # some pixels hold several depth bins of one object
-    r = run("info", os.path.join(REAL, "openexrid_sample_motionblur_transparency.exr"))
+    r = run("info", bundled("openexrid_sample_motionblur_transparency.exr"))
     assert r.exit_code == 0 and "deep-OID" in r.output  # Guerilla's openexrid: one bin per object id
 
 
 def test_info_json_multipart():
-    r = run("info", "--json", STEREO)
+    r = run("info", "--json", shared("Stereo_Trunks.exr"))
     assert r.exit_code == 0
     d = json.loads(r.output)[0]
     assert d["multipart"] and [p["name"] for p in d["parts"]] == ["rgba.left", "rgba.right"]
@@ -57,19 +58,78 @@ def test_info_json_multipart():
 
 
 def test_info_sequence_and_kind(tmp_path):
-    img = random_deep(width=8, height=6, ids=("id",))
-    for f in (1001, 1002, 1003):
-        write_deep(tmp_path / f"shot.{f:04d}.exr", img)
+    """Frames built to be of a known kind: ids unique within every pixel (deep-OID), the same ids with one
+    pixel's two bins sharing an id (deep-Z), no ids (deep-Z); ZBack beyond Z on one bin makes volume samples."""
+    img = random_deep(width=8, height=6, ids=(), channels=("R", "G", "B", "A", "Z", "ZBack"))
+    zb = img.channels.index("ZBack")
+    vals = img.values.copy()
+    vals[:, zb] = vals[:, img.channels.index("Z")]                 # point samples
+    points = img.with_values(vals)
+    oid = points.with_values(points.values)
+    oid.ids = {"id": np.arange(img.num_bins, dtype=np.uint32)}     # every bin its own object
+    deepz = oid.with_values(oid.values)
+    p = int(np.flatnonzero(img.counts >= 2)[0])
+    ids = oid.ids["id"].copy()
+    ids[img.offsets[p] + 1] = ids[img.offsets[p]]                   # one object owns two depth bins of pixel p
+    deepz.ids = {"id": ids}
+    vals = vals.copy()
+    vals[img.offsets[p], zb] += 0.5
+    volume = oid.with_values(vals)
+    volume.ids = dict(oid.ids)
+    frames = {1001: oid, 1002: deepz, 1003: points, 1004: volume}
+    for f, im in frames.items():
+        write_deep(tmp_path / f"shot.{f:04d}.exr", im)
+    r = run("info", "--json", str(tmp_path / "shot.####.exr"))
+    assert r.exit_code == 0, r.output
+    d = json.loads(r.output)
+    assert [os.path.basename(x["file"]) for x in d] == [f"shot.{f}.exr" for f in frames]
+    got = [(x["parts"][0]["kind_guess"], x["parts"][0]["volume_samples"]) for x in d]
+    assert got == [("deep-OID", False), ("deep-Z", False), ("deep-Z", False), ("deep-OID", True)]
     r = run("info", "--json", "--frames", "1001-1003x2", str(tmp_path / "shot.####.exr"))
     assert r.exit_code == 0, r.output
     d = json.loads(r.output)
     assert [os.path.basename(x["file"]) for x in d] == ["shot.1001.exr", "shot.1003.exr"]
-    assert d[0]["parts"][0]["volume_samples"] in (True, False)
+    r = run("info", str(tmp_path / "shot.1002.exr"), str(tmp_path / "shot.1004.exr"))
+    assert r.exit_code == 0 and r.output.count("deep-Z (guess)") == 1 and r.output.count("deep-OID (guess)") == 1
+    assert r.output.count("volume samples: yes") == 1 and r.output.count("volume samples: no") == 1
 
 
-def test_info_flat_file_is_described():
-    r = run("info", FLAT)
-    assert r.exit_code == 0 and "flat image (not deep)" in r.output
+def _kind_by_openimageio(path):
+    """deep-Z vs deep-OID computed from OpenImageIO's own reading of the file: deep-OID when the object id
+    channel ('id'/'Id', else the first uint channel) never repeats within a pixel; no id channel: deep-Z."""
+    import OpenImageIO as oiio
+
+    buf = oiio.ImageBuf(str(path))
+    spec, dd = buf.spec(), buf.deepdata()
+    names = list(spec.channelnames)
+    uints = [n for i, n in enumerate(names) if str(spec.channelformat(i)) == "uint"]
+    idc = next((n for n in ("id", "Id") if n in names), uints[0] if uints else None)
+    if idc is None:
+        return "deep-Z"
+    j = names.index(idc)
+    for p in range(dd.pixels):
+        ids = [dd.deep_value_uint(p, j, s) for s in range(dd.samples(p))]
+        if len(set(ids)) < len(ids):
+            return "deep-Z"
+    return "deep-OID"
+
+
+KNOWN_KINDS = {"objectid.deep.exr": "deep-Z", "openexr_test_11.deep.exr": "deep-OID",
+               "openexr_test_42.deep.exr": "deep-Z", "LowResLeftView_Trunks.exr": "deep-Z",   # no ids
+               "openexrid_sample_motionblur_transparency.exr": "deep-OID"}                  # openexrid: by design
+
+
+@pytest.mark.parametrize("path", bundled_deep_files(), ids=os.path.basename)
+def test_info_kind_of_real_files(path):
+    r = run("info", "--json", path)
+    assert r.exit_code == 0, r.output
+    kind = json.loads(r.output)[0]["parts"][0]["kind_guess"]
+    assert kind == KNOWN_KINDS[os.path.basename(path)] == _kind_by_openimageio(path)
+
+
+def test_info_flat_file_is_described(tmp_path):
+    r = run("info", write_small_flat(tmp_path / "flat.exr"))
+    assert r.exit_code == 0 and "flat image (not deep)" in r.output and "8x6" in r.output
 
 
 # ---- flatten -------------------------------------------------------------------------------------------
@@ -94,12 +154,17 @@ def test_flatten_sequence_to_pattern(tmp_path):
     assert sorted(p.name for p in tmp_path.glob("out.*.exr")) == ["out.0001.exr", "out.0002.exr", "out.0003.exr"]
 
 
-def test_flatten_offset_data_window_matches_oiio(tmp_path):
+@pytest.mark.parametrize("name, data_window", [
+    ("LowResLeftView_Trunks.exr", (0, 141, 1023, 575)),
+    pytest.param("LowResLeftView_Balls.exr", (131, 170, 894, 575), id="LowResLeftView_Balls.exr (../shared)")])
+def test_flatten_offset_data_window_matches_oiio(tmp_path, name, data_window):
     """OpenImageIO's flatten composites in file order without tidying: equal to ours with --assume-tidy,
     and equal to our default wherever a pixel has no coincident samples (which tidying merges)."""
     import OpenImageIO as oiio
 
-    src = os.path.join(REAL, "LowResLeftView_Balls.exr")  # data window inside the display window
+    from ranad_core.exr import read_deep
+
+    src = bundled(name) if name == "LowResLeftView_Trunks.exr" else shared(name)  # data window inside display
     buf = oiio.ImageBufAlgo.flatten(oiio.ImageBuf(src))
     theirs = buf.get_pixels(oiio.FLOAT)
     names = list(buf.spec().channelnames)
@@ -115,15 +180,20 @@ def test_flatten_offset_data_window_matches_oiio(tmp_path):
         r = run("flatten", src, "-o", str(tmp_path / "b.exr"), "--float", *flags)
         assert r.exit_code == 0, r.output
         pixels, channels, dw, disp = read_flat(tmp_path / "b.exr")
-        assert dw == (131, 170, 894, 575) and disp == (0, 0, 1023, 575)
+        assert dw == data_window and disp == (0, 0, 1023, 575)
         for c in ("R", "G", "B", "A"):
             np.testing.assert_allclose(pixels[..., channels.index(c)][mask], theirs[..., names.index(c)][mask],
                                        rtol=1e-5, atol=1e-6)
 
 
 # ---- errors --------------------------------------------------------------------------------------------
-@pytest.mark.parametrize("case", ["missing", "not_exr", "flat", "truncated", "corrupt", "compression",
-                                  "directory"])
+# what each error must say (so a case cannot pass by failing for another reason, e.g. a file that is missing)
+BAD_INPUT_PROBLEM = {"missing": "no such file", "not_exr": "not an EXR", "flat": "not a deep image",
+                     "truncated": "truncated|cut short", "corrupt": "corrupt", "compression": "compression",
+                     "directory": "directory"}
+
+
+@pytest.mark.parametrize("case", list(BAD_INPUT_PROBLEM))
 def test_bad_input_one_line_exit_2(tmp_path, case):
     if case == "missing":
         path = tmp_path / "nope.exr"
@@ -131,7 +201,7 @@ def test_bad_input_one_line_exit_2(tmp_path, case):
         path = tmp_path / "text.exr"
         path.write_text("not an image")
     elif case == "flat":
-        path = FLAT
+        path = write_small_flat(tmp_path / "flat.exr")
     elif case == "truncated":
         path = tmp_path / "cut.exr"
         data = open(OBJECTID, "rb").read()
@@ -144,28 +214,70 @@ def test_bad_input_one_line_exit_2(tmp_path, case):
         write_bad_compression(OBJECTID, path)
     else:
         path = tmp_path
+    assert (case == "missing") != os.path.exists(path)
     out = tmp_path / "o.png"
     for result in (CliRunner().invoke(cli, ["flatten", str(path), "-o", str(out)]),):
         assert result.exit_code == 2, result.output
         lines = result.output.strip().splitlines()
         assert len(lines) == 1 and lines[0].startswith("ranad: error: ") and str(path) in lines[0]
+        assert re.search(BAD_INPUT_PROBLEM[case], lines[0]), lines[0]
         assert "Traceback" not in result.output
     assert not out.exists()
     p = run_process("flatten", str(path), "-o", str(out))
     assert p.returncode == 2 and p.stderr.count("\n") == 1 and "Traceback" not in p.stderr, p.stderr
-    assert str(path) in p.stderr and not out.exists()
+    assert str(path) in p.stderr and re.search(BAD_INPUT_PROBLEM[case], p.stderr) and not out.exists()
+
+
+def _assert_refused(result, target, problem):
+    assert result.exit_code == 2, result.output
+    lines = result.output.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith(f"ranad: error: {target}") and re.search(problem, lines[0])
+    assert not os.path.exists(target)
 
 
 def test_unwritable_output(tmp_path):
     target = tmp_path / "no" / "such" / "dir" / "o.exr"
-    r = CliRunner().invoke(cli, ["flatten", OBJECTID, "-o", str(target)])
-    assert r.exit_code == 2 and "output folder does not exist" in r.output
-    ro = tmp_path / "ro"
-    ro.mkdir()
-    (ro / "keep.txt").write_text("x")
+    _assert_refused(CliRunner().invoke(cli, ["flatten", OBJECTID, "-o", str(target)]), target,
+                    "output folder does not exist")
     p = run_process("flatten", OBJECTID, "-o", str(tmp_path / "no" / "o.png"))
-    assert p.returncode == 2 and "ranad: error:" in p.stderr
-    assert sorted(os.listdir(tmp_path)) == ["ro"]
+    assert p.returncode == 2 and p.stderr.startswith("ranad: error:") and p.stderr.count("\n") == 1
+    # a folder that is a regular file (refused for every user, root included)
+    (tmp_path / "afile").write_text("x")
+    target = tmp_path / "afile" / "o.png"
+    _assert_refused(CliRunner().invoke(cli, ["flatten", OBJECTID, "-o", str(target)]), target, "output folder")
+    assert sorted(os.listdir(tmp_path)) == ["afile"] and (tmp_path / "afile").read_text() == "x"
+
+
+def test_read_only_output_folder(tmp_path):
+    """A read-only folder is refused before any work and left as it was. Root ignores permission bits, so for
+    root the folder is one no user can write in: sysfs or procfs, checked to refuse a file first."""
+    if os.geteuid() != 0:
+        ro = tmp_path / "ro"
+        ro.mkdir()
+        (ro / "keep.txt").write_text("x")
+        ro.chmod(stat.S_IRUSR | stat.S_IXUSR)
+        try:
+            target = ro / "o.png"
+            _assert_refused(CliRunner().invoke(cli, ["flatten", OBJECTID, "-o", str(target)]), target,
+                            "not writable|cannot write")
+            assert os.listdir(ro) == ["keep.txt"]
+        finally:
+            ro.chmod(stat.S_IRWXU)
+        return
+    for folder in ("/sys", "/proc"):
+        try:
+            with open(os.path.join(folder, "ranad-probe.png"), "wb"):
+                pass
+        except OSError:
+            break
+        os.remove(os.path.join(folder, "ranad-probe.png"))
+    else:
+        pytest.skip("running as root, and neither /sys nor /proc refuses new files here")
+    target = os.path.join(folder, "o.png")
+    _assert_refused(CliRunner().invoke(cli, ["flatten", OBJECTID, "-o", target]), target,
+                    "not writable|cannot write")
+    p = run_process("flatten", OBJECTID, "-o", target)
+    assert p.returncode == 2 and p.stderr.count("\n") == 1 and "Traceback" not in p.stderr, p.stderr
 
 
 def test_missing_frame_is_named(tmp_path):
@@ -199,7 +311,7 @@ def test_io_switch_forces_openimageio(tmp_path, monkeypatch):
         raise AssertionError("fast path used despite --io oiio")
 
     monkeypatch.setattr(fast, "read_part", refuse)
-    r = run("--io", "oiio", "info", "--json", os.path.join(REAL, "openexr_test_11.deep.exr"))
+    r = run("--io", "oiio", "info", "--json", bundled("openexr_test_11.deep.exr"))
     assert r.exit_code == 0 and json.loads(r.output)[0]["parts"][0]["bins"] == 6056
     from ranad_core import exr
 
@@ -214,8 +326,39 @@ def test_never_overwrites_input(tmp_path):
     assert r.exit_code == 2 and src.read_bytes() == before
 
 
+HELP_MUST_SAY = {
+    (): ["--io [auto|oiio|fast]", "--debug", "--version"],
+    ("info",): ["INPUTS...", "--frames", "--json", "--no-stats", "deep-Z vs deep-", "bins per pixel"],
+    ("flatten",): ["INPUTS...", "-o, --output", "[required]", "--frames", "--part", "--exposure", "--float", ".png"],
+    ("denoise",): ["INPUTS...", "-o, --output", "[required]", "--frames", "--model", "--device [auto|cpu|cuda]",
+                   "--threads", "--kind [auto|deepz|deepoid]", "--map LAYER=CHANNELS", "--keep-noisy", "--tile",
+                   "--halo", "--max-memory", "[default: 8G]", "--cache", "--skip-existing", "--shard I/N",
+                   "--strict", "--window", "--aovs", "--reference PATTERN"],
+    ("aov",): ["CACHE", "--layers", "-o, --output"],
+    ("eval",): ["DATASET", "-o, --out", "--model", "--spp", "--temporal", "--cross-model"],
+    ("train",): ["DATASETS...", "-o, --run", "--config", "--steps", "--processes"],
+    ("synth",): ["-o, --out", "--scenes", "--size", "--spp", "--ref-spp"],
+    ("export",): ["RUN", "-o, --out", "--note KEY=VALUE"],
+}
+
+
 def test_help_texts():
-    for cmd in ([], ["info"], ["flatten"]):
+    """Every command's help runs and names its options; the top level lists every command and the version."""
+    def run(*args):
+        return CliRunner().invoke(cli, list(args), prog_name="ranad", catch_exceptions=False)
+
+    top = run("--help")
+    assert top.exit_code == 0 and top.output.startswith("Usage: ranad [OPTIONS] COMMAND")
+    listed = top.output.split("\nCommands:\n")[-1]
+    assert sorted(line.split()[0] for line in listed.strip().splitlines()) == sorted(
+        cmd[0] for cmd in HELP_MUST_SAY if cmd)
+    for cmd, phrases in HELP_MUST_SAY.items():
         r = run(*cmd, "--help")
-        assert r.exit_code == 0 and "Usage:" in r.output
-    assert read_deep  # imported for API completeness
+        assert r.exit_code == 0 and r.output.startswith(f"Usage: {' '.join(('ranad',) + cmd)} "), r.output
+        text = " ".join(r.output.split())      # click wraps lines
+        missing = [p for p in phrases if p not in text]
+        assert not missing, (cmd, missing)
+    r = run("--version")
+    assert r.exit_code == 0 and r.output.strip() == f"ranad, version {__version__}"
+    r = run("no-such-command")
+    assert r.exit_code == 2 and "No such command" in r.output
