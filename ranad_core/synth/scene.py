@@ -106,6 +106,14 @@ def _bsdf(rng: np.random.Generator, glossy_prob: float) -> dict:
     return {"type": "diffuse", "reflectance": {"type": "rgb", "value": _rgb(rng)}}
 
 
+def _two_sided(bsdf: dict) -> dict:
+    """A card's BSDF seen from both sides: wrapped in `twosided`, except glass (two-sided already, and Mitsuba
+    refuses to nest a transmissive BSDF)."""
+    if bsdf["type"] in ("dielectric", "roughdielectric", "thindielectric"):
+        return bsdf
+    return {"type": "twosided", "bsdf": bsdf}
+
+
 def _material(rng: np.random.Generator, weights: dict, tex_freq) -> dict:
     """A BSDF drawn from a family's material weights (MATERIALS)."""
     names = list(weights)
@@ -251,12 +259,12 @@ def make_scene(seed: int, preset: str = "medium", size: int = 128, frames: int =
     for _ in range(int(rng.integers(*p["panes"], endpoint=True))):  # semi-transparent panes
         pos = [rng.uniform(-1.8, 1.8), rng.uniform(0.5, 1.3), rng.uniform(-0.5, 3.0)]
         base = translate(pos) @ rotate([0, 1, 0], rng.uniform(-50, 50)) @ scale([rng.uniform(0.5, 1.1), rng.uniform(0.4, 0.9), 1])
-        add("rectangle", {"type": "twosided", "bsdf": _bsdf(rng, 0.3)}, base, opacity=float(rng.uniform(0.2, 0.6)))
+        add("rectangle", _two_sided(_bsdf(rng, 0.3)), base, opacity=float(rng.uniform(0.2, 0.6)))
     for k in range(int(rng.integers(*p["veils"], endpoint=True))):  # large faint panes across the view: layers
         depth = 0.35 + 0.2 * k + rng.uniform(-0.05, 0.05)
         pos = cam_o + (cam_t - cam_o) * depth
         base = look_at(pos, cam_o) @ scale([rng.uniform(1.0, 1.8), rng.uniform(0.8, 1.4), 1])
-        add("rectangle", {"type": "twosided", "bsdf": _bsdf(rng, 0.2)}, base, opacity=float(rng.uniform(0.12, 0.35)),
+        add("rectangle", _two_sided(_bsdf(rng, 0.2)), base, opacity=float(rng.uniform(0.12, 0.35)),
             spin=float(rng.uniform(-6, 6) * m))
     for _ in range(int(rng.integers(*p["cards"], endpoint=True))):  # alpha-cut foliage cards, often overlapping
         pos = [rng.uniform(-2.0, 2.0), rng.uniform(0.3, 1.6), rng.uniform(-1.0, 3.5)]
