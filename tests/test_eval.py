@@ -4,15 +4,13 @@ promises (recolour flattens to the flat image it was given), weights round-trip,
 from __future__ import annotations
 
 import csv
+import importlib.util
 import math
 
 import numpy as np
 import pytest
 import torch
 from click.testing import CliRunner
-
-pytest.importorskip("pyoidn", reason="the OIDN baseline needs pyoidn (pip install 'ranad[eval]')")
-pytest.importorskip("flip_evaluator", reason="HDR-FLIP needs flip-evaluator (pip install 'ranad[eval]')")
 
 from deep_factory import random_deep
 from ranad_cli.main import cli
@@ -23,6 +21,12 @@ from ranad_core.exr import read_deep
 from ranad_core.model import RaNAD, feature_dim, get_config
 from ranad_core.model.store import export_weights, load_model
 from test_train import SHOT, dataset_from_example
+
+# per test, so that the tests needing neither still run where the eval extras are not installed
+needs_oidn = pytest.mark.skipif(importlib.util.find_spec("pyoidn") is None,
+                                reason="the OIDN baseline needs pyoidn (pip install 'ranad[eval]')")
+needs_flip = pytest.mark.skipif(importlib.util.find_spec("flip_evaluator") is None,
+                                reason="HDR-FLIP needs flip-evaluator (pip install 'ranad[eval]')")
 
 
 def untrained_run(tmp_path):
@@ -42,6 +46,7 @@ def beauty_image(seed=0):
     return img.with_values(vals)
 
 
+@needs_flip
 def test_metrics_are_zero_on_identical_images_and_grow_with_noise():
     img = beauty_image()
     flat = metrics.flat_rgb(img)
@@ -55,18 +60,41 @@ def test_metrics_are_zero_on_identical_images_and_grow_with_noise():
     assert 0 < s1["flip"] < s2["flip"] and 0 < s1["smape"] < s2["smape"] and 0 < s1["dssim"] < s2["dssim"]
 
 
+def _over(bins):
+    """Front-to-back 'over' of [(z, (r, g, b), a)] premultiplied point samples at distinct depths (float64)."""
+    rgb, acc = np.zeros(3), 0.0
+    for _, c, a in sorted(bins, key=lambda b: b[0]):
+        rgb += (1 - acc) * np.asarray(c, np.float64)
+        acc += (1 - acc) * a
+    return rgb
+
+
 def test_edits_recolour_the_front_and_insert_a_layer():
+    """The compositing edit and the depth slices against a pixel-by-pixel composite written out here: bins in
+    front of the split recoloured by the protocol's gain (1.6, 0.8, 0.5), a layer of premultiplied colour
+    (0.08, 0.25, 0.6) and alpha 0.5 inserted at the split depth."""
+    gain, layer = np.array([1.6, 0.8, 0.5]), ((0.08, 0.25, 0.6), 0.5)
     img = beauty_image()
-    z = metrics.split_depth(img)
-    front, back = metrics.depth_slices(img, z)
-    zc = img.channel("Z")
-    assert img.keep(zc < z).num_bins + img.keep(zc >= z).num_bins == img.num_bins
-    edit = metrics.composite_edit(img, z)
+    rgb, a, z = img.values[:, :3].astype(np.float64), img.values[:, 3].astype(np.float64), img.channel("Z")
+    assert len(np.unique(z)) == img.num_bins                      # distinct depths: no coincident samples
+    assert metrics.split_depth(img) == pytest.approx(float(np.median(z)))
+    split = float(np.sort(z)[img.num_bins // 2 - 1] + np.sort(z)[img.num_bins // 2]) / 2   # between two bins
+    edit = metrics.composite_edit(img, split).reshape(-1, 3)
+    front, back = (s.reshape(-1, 3) for s in metrics.depth_slices(img, split))
+    kinds = set()
+    for p in range(img.num_pixels):
+        b = range(img.offsets[p], img.offsets[p + 1])
+        fg = [i for i in b if z[i] < split]
+        bg = [i for i in b if z[i] >= split]
+        kinds.add((bool(fg), bool(bg)))
+        want = _over([(z[i], rgb[i] * (gain if z[i] < split else 1), a[i]) for i in b] + [(split, *layer)])
+        np.testing.assert_allclose(edit[p], want, rtol=1e-5, atol=1e-6, err_msg=f"pixel {p}")
+        np.testing.assert_allclose(front[p], _over([(z[i], rgb[i], a[i]) for i in fg]), rtol=1e-5, atol=1e-6)
+        np.testing.assert_allclose(back[p], _over([(z[i], rgb[i], a[i]) for i in bg]), rtol=1e-5, atol=1e-6)
+    assert {(False, False), (True, False), (False, True), (True, True)} <= kinds   # every case was checked
     # a pixel with no bins shows only the inserted layer
     empty = int(np.flatnonzero(img.counts == 0)[0])
-    np.testing.assert_allclose(edit.reshape(-1, 3)[empty], metrics.INSERT_COLOUR, rtol=1e-6)
-    # all-background pixels: the layer over the background; all-foreground: recoloured front over the layer
-    assert not np.allclose(front + back, metrics.flat_rgb(img))  # slices are not a split of the flat image
+    np.testing.assert_allclose(edit[empty], layer[0], rtol=1e-6)
 
 
 def test_recolour_flattens_to_the_given_image_and_keeps_the_layout():
@@ -134,6 +162,8 @@ def test_bad_model_files_are_refused(tmp_path):
         load_model("no-such-model")
 
 
+@needs_oidn
+@needs_flip
 def test_eval_command_writes_table_csv_and_grid(tmp_path):
     ds = dataset_from_example(tmp_path / "ds")
     run = untrained_run(tmp_path)
