@@ -34,6 +34,7 @@ def aov_cmd(cache, pattern, output, aov_input):
     from ranad_core import cache as cache_io
     from ranad_core.aov import aov_layers, denoise_aovs
     from ranad_core.channels import detect
+    from ranad_core.deep import replace_nonfinite
     from ranad_core.exr import read_deep, write_deep
     from ranad_core.exr.sequence import Frame, format_frame, is_pattern, output_path
     from ranad_core.fileutil import check_writable_target
@@ -106,7 +107,7 @@ def aov_cmd(cache, pattern, output, aov_input):
             result = denoise_aovs(loaded.model, combined, centre, mapping, layers,
                                   [tensors[f"embeddings.{i}"] for i in range(k)],
                                   [tensors[f"perm.{i}"] for i in range(k)], [tensors[f"offsets.{i}"] for i in range(k)])
-            target = aov_imgs[centre]
+            target = replace_nonfinite(aov_imgs[centre], mapping.depth_channels())[0]   # the one NaN/Inf policy
             vals = target.values.copy()
             for layer, chans in layers.items():
                 for i, c in enumerate(chans):

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import os
 import re
+import sys
 
 import click
 from tqdm import tqdm
@@ -35,9 +36,24 @@ def parse_bytes(text: str) -> float:
               help="Where the model runs (auto: cpu until the CUDA RaNA kernels are available).")
 @click.option("--threads", type=click.IntRange(1), default=None, help="CPU threads (default: all cores).")
 @click.option("--kind", type=click.Choice(["auto", "deepz", "deepoid"]), default="auto", show_default=True,
-              help="Deep-Z or deep-OID input (auto: deep-OID when an id channel separates every pixel's bins).")
+              help="What every frame must be: deepz, or deepoid (an id channel gives every bin of a pixel its own "
+                   "id); a frame of the other kind is an error naming it. The model handles both kinds alike; "
+                   "auto accepts either and reports the first frame's.")
 @click.option("--map", "maps", multiple=True, metavar="LAYER=CHANNELS",
-              help="Channel mapping override, e.g. --map diffuse=diff_direct or --map albedo=aR,aG,aB.")
+              help="Channel mapping override, e.g. --map diffuse=diff_direct, --map albedo=aR,aG,aB, "
+                   "--map diffuse=diffuse_direct+diffuse_indirect (a sum), --map motion_prev=mv.X,mv.Y (per-bin "
+                   "motion to the previous frame; motion_next to the next).")
+@click.option("--preset", default=None, type=click.Choice(["renderman", "arnold", "karma", "vray", "redshift"]),
+              help="Try this renderer's documented deep AOV names and motion conventions first (README, "
+                   "'Renderers'); --map overrides it.")
+@click.option("--motion-units", type=click.Choice(["pixels", "ndc", "velocity"]), default=None,
+              help="Units of the motion channels: pixels (per frame, or per --shutter frames), ndc (fraction of the "
+                   "display window), velocity (pixels per second, needs --fps). Default: pixels, or the preset's.")
+@click.option("--fps", type=float, default=None, help="Frames per second, for --motion-units velocity.")
+@click.option("--shutter", type=float, default=None,
+              help="The motion channels span this many frames (e.g. 0.5 for a 180-degree shutter); default 1.")
+@click.option("--motion-y", type=click.Choice(["up", "down"]), default=None,
+              help="Direction of the motion channels' y axis (default down, as pixel rows; up for screen space).")
 @click.option("--keep-noisy", metavar="PREFIX", default=None,
               help="Also write the noisy versions of the replaced channels under PREFIX (e.g. 'noisy.').")
 @click.option("--tile", type=click.IntRange(16), default=None,
@@ -58,8 +74,9 @@ def parse_bytes(text: str) -> float:
                    "beauty's kernels (see `ranad aov`).")
 @click.option("--reference", default=None, metavar="PATTERN",
               help="Reference frames (same layout) to report how much closer to them the output got.")
-def denoise_cmd(inputs, output, frames, model, device, threads, kind, maps, keep_noisy, tile, halo, max_memory,
-                cache_dir, skip_existing, shard, strict, window, aovs, reference):
+def denoise_cmd(inputs, output, frames, model, device, threads, kind, maps, preset, motion_units, fps, shutter,
+                motion_y, keep_noisy, tile, halo, max_memory, cache_dir, skip_existing, shard, strict, window, aovs,
+                reference):
     """Denoise deep EXR INPUTS (files or patterns such as beauty.####.exr) into deep EXRs with the same pixels,
     bins, bin order, channels, ids and header: diffuse, specular, alpha and depth are denoised and the beauty
     is rebuilt from them.
@@ -71,22 +88,24 @@ def denoise_cmd(inputs, output, frames, model, device, threads, kind, maps, keep
     """
     import torch
 
-    from ranad_core.channels import detect, parse_overrides
+    from ranad_core.channels import detect, mapping_options
     from ranad_core.exr import read_deep
-    from ranad_core.exr.inspect import guess_kind
     from ranad_core.exr.sequence import expand_inputs, format_frame, is_pattern, output_path, shard as take_shard
     from ranad_core.fileutil import check_writable_target
     from ranad_core.model.store import load_model, training_window
-    from ranad_core.shot import ShotOptions, denoise_shot, prescan
+    from ranad_core.shot import ShotOptions, check_kind, denoise_shot, prescan
 
     budget = parse_bytes(max_memory)
     if device == "cuda":  # auto runs on the CPU until the CUDA kernels land (issue 9)
         raise RanadError("the CUDA RaNA kernels are not available in this build; use --device cpu", "--device")
     if threads:
         torch.set_num_threads(threads)
-    overrides = parse_overrides(maps)
+    overrides = mapping_options(maps, preset, motion_units, fps, shutter, motion_y)
     sequence = expand_inputs(list(inputs), frames)
     frames_list = take_shard(sequence, shard) if shard else sequence
+    if not frames_list:
+        click.echo(f"nothing to do: shard {shard} has no frames (the shot has {len(sequence)})")
+        return
     if is_pattern(output) or not output.endswith((os.sep, "/")):
         _make_folder(os.path.dirname(os.path.abspath(output)), output)
     else:
@@ -108,12 +127,13 @@ def denoise_cmd(inputs, output, frames, model, device, threads, kind, maps, keep
     loaded = load_model(model)
     first = read_deep(frames_list[0].path)
     mapping = detect(first, overrides, frames_list[0].path)
-    detected = "deepoid" if guess_kind(first) == "deep-OID" else "deepz"
-    click.echo(f"model {loaded.model_id}; {'deep-OID' if (kind if kind != 'auto' else detected) == 'deepoid' else 'deep-Z'}"
-               f" input; channels: {mapping.mode()}", err=True)
+    found = check_kind(first, kind, frames_list[0].path)
+    click.echo(f"model {loaded.model_id}; {'deep-OID' if found == 'deepoid' else 'deep-Z'} input"
+               f"{'' if kind == 'auto' else ' (--kind ' + kind + ', checked on every frame)'}; "
+               f"channels: {mapping.mode()}; motion: {mapping.motion.describe()}", err=True)
     opts = ShotOptions(model_spec=model, overrides=overrides, tile=tile, halo=halo, max_memory=budget,
                        keep_noisy=keep_noisy, cache_dir=cache_dir, skip_existing=skip_existing, strict=strict,
-                       window=window or training_window(loaded), aovs=aovs)
+                       window=window or training_window(loaded), aovs=aovs, kind=kind)
     scores = []
 
     def on_frame(job, img, result):
@@ -132,11 +152,22 @@ def denoise_cmd(inputs, output, frames, model, device, threads, kind, maps, keep
 
     with tqdm(total=len(jobs), desc="frames", unit="frame", disable=len(jobs) <= 1, position=0) as fbar, \
             tqdm(desc="tiles", unit="tile", leave=False, position=1) as tbar:
-        summary = denoise_shot(jobs, loaded, opts, fbar.update, _TileBar(tbar), on_frame, sequence)
+        warned = []
+
+        def warn(msg):
+            warned.append(msg)
+            tqdm.write(f"ranad: warning: {msg}", file=sys.stderr)
+
+        summary = denoise_shot(jobs, loaded, opts, fbar.update, _TileBar(tbar), on_frame, sequence, warn)
     for msg in summary.messages:
-        click.echo(f"ranad: warning: {msg}", err=True)
+        if msg not in warned:
+            click.echo(f"ranad: warning: {msg}", err=True)
     click.echo(f"denoised {summary.frames} frame(s), {summary.bins} bins, in {summary.seconds:.1f} s"
-               + (f"; skipped {summary.skipped} existing" if summary.skipped else ""))
+               + (f"; skipped {summary.skipped} existing" if summary.skipped else "")
+               + (f"; {summary.nonfinite} bin(s) with NaN/Inf replaced" if summary.nonfinite else "")
+               + (f"; {summary.dropped} neighbour bin(s) carried out of the frame by motion (not used)"
+                  if summary.dropped else "")
+               + ("; WITHOUT motion compensation (no motion channels)" if summary.no_motion else ""))
     for path, before, after in scores:
         click.echo(f"{os.path.basename(path)}: flattened SMAPE vs reference {before:.4f} -> {after:.4f} "
                    f"({before / max(after, 1e-12):.1f}x closer)")

@@ -32,8 +32,13 @@ def _print_text(d: dict) -> None:
             click.echo("    flat image (not deep)")
             continue
         dc = p.get("denoise_channels", {})
-        layers = ", ".join(f"{k}={v}" for k, v in dc.items() if k != "mode" and v != "-")
+        skip = ("mode", "motion", "motion_candidates")
+        layers = ", ".join(f"{k}={v}" for k, v in dc.items() if k not in skip and v != "-")
         click.echo(f"    ranad denoise reads: {dc.get('mode', '?')}" + (f" ({layers})" if layers else ""))
+        if "motion" in dc:
+            hint = dc.get("motion_candidates")
+            click.echo(f"    motion channels: {dc['motion']}"
+                       + (f" (not mapped; may hold motion: {', '.join(hint)}: --map motion_prev=X,Y)" if hint else ""))
         if "bins_per_pixel" not in p:
             continue
         b = p["bins_per_pixel"]
@@ -53,14 +58,21 @@ def _print_text(d: dict) -> None:
 @click.option("--frames", help="Frame range for patterns, e.g. 1001-1010 or 1001-1100x2 (default: all on disk).")
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON document (a list, one entry per file).")
 @click.option("--no-stats", is_flag=True, help="Headers only: skip reading the samples (fast on big files).")
-def info_cmd(inputs: tuple[str, ...], frames: str | None, as_json: bool, no_stats: bool) -> None:
+@click.option("--map", "maps", multiple=True, metavar="LAYER=CHANNELS",
+              help="Show the channels `ranad denoise --map ...` would read (same syntax).")
+@click.option("--preset", default=None, type=click.Choice(["renderman", "arnold", "karma", "vray", "redshift"]),
+              help="Show the channels `ranad denoise --preset ...` would read.")
+def info_cmd(inputs: tuple[str, ...], frames: str | None, as_json: bool, no_stats: bool, maps, preset) -> None:
     """Describe deep EXR files: INPUTS are files or patterns (name.####.exr, name.%04d.exr, name.@@@@.exr).
 
-    Shows resolution, windows, parts, channels and their types, deep-Z vs deep-OID guess, bins per pixel
-    (min/mean/max, share of empty pixels), volume samples, deepImageState, id channels, id manifest,
-    compression and file size.
+    Shows resolution, windows, parts, channels and their types, the channels `ranad denoise` reads (layers and
+    per-bin motion), deep-Z vs deep-OID guess, bins per pixel (min/mean/max, share of empty pixels), volume
+    samples, deepImageState, id channels, id manifest, compression and file size.
     """
-    results = [describe(f.path, stats=not no_stats) for f in expand_inputs(list(inputs), frames)]
+    from ranad_core.channels import mapping_options
+
+    overrides = mapping_options(maps, preset)
+    results = [describe(f.path, stats=not no_stats, overrides=overrides) for f in expand_inputs(list(inputs), frames)]
     if as_json:
         click.echo(json.dumps(results, indent=2))
     else:

@@ -26,7 +26,7 @@ import numpy as np
 import torch
 
 from .channels import ChannelMap, canonical
-from .deep import DeepImage, unsort
+from .deep import DeepImage, replace_nonfinite, unsort
 from .errors import RanadError
 from .model.inputs import ModelInputs
 from .model.layers import Layout
@@ -57,7 +57,9 @@ def kernel_rule(layer: str) -> str:
 
 def _values(img: DeepImage, m: ChannelMap, layers: dict, perm: np.ndarray) -> dict:
     """Per reconstruction ('diffuse', 'specular', 'pass') the [N, 3 * len(layers)] values of one (compensated)
-    frame in sorted order; 'pass' holds the emission share that is not denoised."""
+    frame in sorted order; 'pass' holds the emission share that is not denoised. Non-finite values follow the
+    one NaN/Inf policy (deep.replace_nonfinite) before anything is computed."""
+    img = replace_nonfinite(img, m.depth_channels())[0]
     canon, residual = canonical(img, m)
     n = img.num_bins
     beauty = np.stack([img.channel(c) for c in m.beauty], 1).astype(np.float64)
@@ -71,7 +73,7 @@ def _values(img: DeepImage, m: ChannelMap, layers: dict, perm: np.ndarray) -> di
     r_d = 1.0 - r_s - r_e
     out = {"diffuse": [], "specular": [], "pass": []}
     for layer, chans in layers.items():
-        v = np.nan_to_num(np.stack([img.channel(c) for c in chans], 1).astype(np.float64))
+        v = np.stack([img.channel(c) for c in chans], 1).astype(np.float64)
         rule = kernel_rule(layer)
         if rule == "diffuse" or (rule == "specular" and not m.split):
             parts = (v, 0 * v, 0 * v)
@@ -94,7 +96,7 @@ def denoise_aovs(model, images: list, centre: int, mapping: ChannelMap, layers: 
     from .motion import compensate
 
     cross = is_cross_frame(model)
-    moved, _ = compensate(images, centre) if len(images) > 1 else (images, 0)
+    moved, _ = compensate(images, centre, motion=mapping.motion) if len(images) > 1 else (images, 0)
     h, w = images[centre].height, images[centre].width
     vals, window = [], []
     for k, img in enumerate(moved):

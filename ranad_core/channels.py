@@ -7,7 +7,15 @@ denoises with their own kernels), `emission.RGB` (passed through), `albedo.RGB` 
 - the beauty is `R, G, B` (required), with `A` and `Z` (required) and `ZBack` (optional);
 - every other layer is looked up by its aliases (`diffuse`/`diff`, `specular`/`spec`, `emission`/`emit`,
   `albedo`, `N`/`normal`), with components `R/G/B`, `r/g/b`, `X/Y/Z` or `x/y/z` (`layer.R` naming);
-- `--map layer=name` overrides: `diffuse=diff_direct` (a layer prefix) or `diffuse=dR,dG,dB` (three channels).
+- `--map layer=name` overrides: `diffuse=diff_direct` (a layer prefix) or `diffuse=dR,dG,dB` (three channels),
+  or a sum of layers, `diffuse=diffuse_direct+diffuse_indirect` (the model denoises the sum; the output writes
+  the denoised sum back into the parts in the proportions of their noisy values, per bin and channel);
+- motion (per bin, what motion compensation of cross-frame windows reads): `motion_prev.X/Y` and
+  `motion_next.X/Y` by default; `--map motion_prev=mv.X,mv.Y` (two channels) or `--map motion_prev=mv` (a
+  prefix with .X/.Y, .x/.y, .R/.G, .r/.g or .u/.v) name a renderer's channels, and `MotionSpec` converts them
+  to the canonical meaning: pixels per frame, x right, y down, from this bin to its position in the
+  previous/next frame (`--motion-units pixels|ndc|velocity`, `--fps`, `--shutter`, `--motion-y up|down`);
+- `--preset RENDERER` (presets.py) tries a renderer's documented AOV names before the generic aliases.
 
 Modes (what `ranad info` reports and `ranad denoise` uses):
 
@@ -35,7 +43,8 @@ ALIASES = {
     "albedo": ("albedo", "Albedo", "diffuse_albedo", "denoise_albedo"),
     "normal": ("N", "normal", "Normal", "normals", "N_world"),
 }
-COMPONENTS = {"rgb": (("R", "G", "B"), ("r", "g", "b")), "xyz": (("X", "Y", "Z"), ("x", "y", "z"))}
+COMPONENTS = {"rgb": (("R", "G", "B"), ("r", "g", "b")), "xyz": (("X", "Y", "Z"), ("x", "y", "z")),
+              "xy": (("X", "Y"), ("x", "y"), ("R", "G"), ("r", "g"), ("u", "v"), ("U", "V"))}
 CANONICAL = {"diffuse": "diffuse", "specular": "specular", "emission": "emission", "albedo": "albedo", "normal": "N"}
 # Per-bin copies of per-pixel values that ranad itself adds to the canonical image (never read from or written to
 # files): the flat prior (OIDN's denoised flattened beauty of the bin's pixel; `PRIOR_NOAUX` the same without the
@@ -43,6 +52,71 @@ CANONICAL = {"diffuse": "diffuse", "specular": "specular", "emission": "emission
 PRIOR = ("ranad_prior.R", "ranad_prior.G", "ranad_prior.B")
 PRIOR_NOAUX = ("ranad_prior_noaux.R", "ranad_prior_noaux.G", "ranad_prior_noaux.B")
 FLAT_NOISY = ("ranad_flat.R", "ranad_flat.G", "ranad_flat.B")
+
+#: per-bin motion layers, in their canonical names (pixels per frame, x right, y down; ranad synth writes them)
+MOTION_LAYERS = ("motion_prev", "motion_next")
+CANONICAL_MOTION = {k: (f"{k}.X", f"{k}.Y") for k in MOTION_LAYERS}
+MOTION_UNITS = ("pixels", "ndc", "velocity")
+#: names that look like motion data (what the "no motion" warning points at when none is mapped)
+MOTION_HINTS = ("motion", "mv", "velocity", "vel", "flow", "dpdtime", "vector")
+
+
+@dataclass(frozen=True)
+class MotionSpec:
+    """Which channels hold per-bin motion, and how to read them as canonical motion (pixels per frame, x right,
+    y down, from a bin to its position in the previous/next frame).
+
+    units: `pixels` (displacement in pixels over `shutter` frames), `ndc` (displacement as a fraction of the
+    display window's width/height over `shutter` frames), `velocity` (pixels per second; divided by `fps`).
+    y_up: the file's y axis points up (screen space), so y is negated."""
+    prev: tuple | None = None
+    next: tuple | None = None
+    units: str = "pixels"
+    fps: float | None = None
+    shutter: float = 1.0
+    y_up: bool = False
+
+    @property
+    def found(self) -> bool:
+        return bool(self.prev or self.next)
+
+    def channels(self, direction: str) -> tuple | None:
+        return self.prev if direction == "motion_prev" else self.next
+
+    def scale(self, img: DeepImage) -> tuple[float, float]:
+        """Factors from the file's values to canonical pixels per frame, (x, y)."""
+        if self.units == "velocity":
+            sx = sy = 1.0 / float(self.fps)
+        elif self.units == "ndc":
+            dw = img.display_window
+            sx, sy = (dw[2] - dw[0] + 1) / self.shutter, (dw[3] - dw[1] + 1) / self.shutter
+        else:
+            sx = sy = 1.0 / self.shutter
+        return sx, (-sy if self.y_up else sy)
+
+    def vectors(self, img: DeepImage, direction: str) -> np.ndarray | None:
+        """[N, 2] float32 canonical motion of `img`'s bins towards `direction` ('motion_prev' or 'motion_next'),
+        or None when that direction is not mapped (or the frame lacks the channels). Non-finite values are 0."""
+        chans = self.channels(direction)
+        if not chans or not all(c in img.channels for c in chans):
+            return None
+        v = np.stack([img.channel(c) for c in chans], 1).astype(np.float64)
+        v = np.nan_to_num(v, nan=0.0, posinf=0.0, neginf=0.0) * np.asarray(self.scale(img))
+        return v.astype(np.float32)
+
+    @classmethod
+    def canonical(cls) -> "MotionSpec":
+        """ranad's own channels (what `ranad synth` writes): motion_prev/motion_next.X/Y in pixels."""
+        return cls(prev=CANONICAL_MOTION["motion_prev"], next=CANONICAL_MOTION["motion_next"])
+
+    def describe(self) -> str:
+        if not self.found:
+            return "none"
+        parts = [f"{k}={','.join(v)}" for k, v in (("motion_prev", self.prev), ("motion_next", self.next)) if v]
+        conv = self.units + (f" at {self.fps:g} fps" if self.units == "velocity" else "")
+        if self.units != "velocity" and self.shutter != 1.0:
+            conv += f" over {self.shutter:g} frame(s)"
+        return f"{' '.join(parts)} ({conv}, y {'up' if self.y_up else 'down'})"
 
 
 @dataclass
@@ -53,7 +127,9 @@ class ChannelMap:
     depth: str = "Z"
     depth_back: str | None = None
     coverage: str | None = None
-    layers: dict = field(default_factory=dict)   # semantic name -> (3 channel names) or None
+    layers: dict = field(default_factory=dict)   # semantic name -> (3 channel names), a tuple of such (sum), None
+    motion: MotionSpec = field(default_factory=MotionSpec)
+    preset: str | None = None
 
     @property
     def split(self) -> bool:
@@ -71,12 +147,55 @@ class ChannelMap:
     def describe(self) -> dict:
         d = {"beauty": ",".join(self.beauty), "alpha": self.alpha, "depth": self.depth,
              "depth_back": self.depth_back or "-"}
-        d.update({k: (",".join(v) if v else "-") for k, v in self.layers.items()})
+        d.update({k: describe_layer(v) for k, v in self.layers.items()})
+        d["motion"] = self.motion.describe()
+        if self.preset:
+            d["preset"] = self.preset
         d["mode"] = self.mode()
         return d
 
+    def depth_channels(self) -> tuple:
+        """The file channels holding depth (what the NaN/Inf policy fills with the frame's largest depth)."""
+        return tuple(c for c in (self.depth, self.depth_back) if c)
 
-def _find_layer(channels: list, names, kind: str):
+
+def layer_parts(chans) -> list:
+    """The (R, G, B) channel triples a layer entry sums: [] when absent, one for a plain layer."""
+    if not chans:
+        return []
+    return [tuple(p) for p in chans] if isinstance(chans[0], (tuple, list)) else [tuple(chans)]
+
+
+def describe_layer(chans) -> str:
+    return "+".join(",".join(p) for p in layer_parts(chans)) or "-"
+
+
+def layer_values(img: DeepImage, chans) -> np.ndarray | None:
+    """[N, 3] float32 values of a layer entry (the sum of its parts), None when absent."""
+    parts = layer_parts(chans)
+    if not parts:
+        return None
+    out = np.stack([img.channel(c) for c in parts[0]], 1).astype(np.float32)
+    for p in parts[1:]:
+        out = out + np.stack([img.channel(c) for c in p], 1).astype(np.float32)
+    return out
+
+
+def split_layer(img: DeepImage, chans, total: np.ndarray) -> list:
+    """[(channel triple, [N, 3] values)] writing `total` back into a layer entry: a plain layer gets `total`; a
+    sum's parts get it in the proportions of their noisy values (per bin and channel, equal shares where the
+    noisy parts cancel out), so the parts sum to `total`."""
+    parts = layer_parts(chans)
+    if len(parts) == 1:
+        return [(parts[0], total)]
+    noisy = [np.nan_to_num(np.stack([img.channel(c) for c in p], 1).astype(np.float64)) for p in parts]
+    s = sum(noisy)
+    ok = np.abs(s) > 1e-12
+    safe = np.where(ok, s, 1.0)
+    return [(p, (total * np.where(ok, v / safe, 1.0 / len(parts))).astype(np.float32)) for p, v in zip(parts, noisy)]
+
+
+def _find_layer(channels, names, kind: str):
     for name in names:
         for comps in COMPONENTS[kind]:
             cand = tuple(f"{name}.{c}" for c in comps)
@@ -85,19 +204,71 @@ def _find_layer(channels: list, names, kind: str):
     return None
 
 
+def _parse_value(key: str, val: str, item: str):
+    """One --map value: a prefix (str), explicit channels (tuple), or a sum {'sum': [prefix or channels, ...]}."""
+    width = 2 if key in MOTION_LAYERS else 3
+    terms = [t.strip() for t in val.split("+")]
+    if len(terms) > 1 and key in MOTION_LAYERS:
+        raise RanadError(f"--map {item!r}: motion layers cannot be summed", None)
+    out = []
+    for t in terms:
+        parts = tuple(p.strip() for p in t.split(",") if p.strip())
+        if len(parts) not in (1, width):
+            what = "two channels" if width == 2 else "three channels"
+            raise RanadError(f"--map {item!r}: give a layer prefix or {what}" + (" per summed layer" if len(terms) > 1
+                                                                                 else ""), None)
+        out.append(parts[0] if len(parts) == 1 else parts)
+    return out[0] if len(out) == 1 else {"sum": out}
+
+
 def parse_overrides(items) -> dict:
-    """['diffuse=diff', 'albedo=aR,aG,aB'] -> {'diffuse': 'diff', 'albedo': ('aR', 'aG', 'aB')}."""
+    """['diffuse=diff', 'albedo=aR,aG,aB', 'diffuse=a+b', 'motion_prev=mv.X,mv.Y'] -> {'diffuse': 'diff', ...}
+    (a prefix, a tuple of channels, or {'sum': [...]}); JSON-able, so a cache records it."""
     out = {}
     for item in items or ():
         if "=" not in item:
-            raise RanadError(f"cannot read --map {item!r} (expected layer=prefix or layer=c1,c2,c3)", None)
+            raise RanadError(f"cannot read --map {item!r} (expected layer=prefix, layer=c1,c2,c3 or layer=a+b)", None)
         key, val = (s.strip() for s in item.split("=", 1))
-        if key not in ALIASES:
-            raise RanadError(f"--map {item!r}: unknown layer {key!r} (known: {', '.join(ALIASES)})", None)
-        parts = tuple(p.strip() for p in val.split(",") if p.strip())
-        if len(parts) not in (1, 3):
-            raise RanadError(f"--map {item!r}: give one layer prefix or three channels", None)
-        out[key] = parts[0] if len(parts) == 1 else parts
+        if key not in ALIASES and key not in MOTION_LAYERS:
+            raise RanadError(f"--map {item!r}: unknown layer {key!r} (known: {', '.join((*ALIASES, *MOTION_LAYERS))})",
+                             None)
+        if not val:
+            raise RanadError(f"--map {item!r}: no channels given", None)
+        out[key] = _parse_value(key, val, item)
+    return out
+
+
+def mapping_options(maps=(), preset: str | None = None, motion_units: str | None = None, fps: float | None = None,
+                    shutter: float | None = None, motion_y: str | None = None) -> dict:
+    """The whole channel-mapping recipe of a command line as one JSON-able dict (what `detect` reads and a cache
+    records): the --map overrides, the preset, and the motion conversion (None: not given, so the preset's or
+    the default: pixels per frame, y down). Inconsistent options are RanadErrors."""
+    from .presets import PRESETS
+
+    out = parse_overrides(maps)
+    if preset is not None:
+        if preset not in PRESETS:
+            raise RanadError(f"--preset {preset!r}: unknown renderer (known: {', '.join(PRESETS)})", None)
+        out["preset"] = preset
+    given = any(v is not None for v in (motion_units, fps, shutter, motion_y))
+    motion_units, motion_y = motion_units or "pixels", motion_y or "down"
+    if motion_units not in MOTION_UNITS:
+        raise RanadError(f"--motion-units {motion_units!r}: use one of {', '.join(MOTION_UNITS)}", None)
+    if motion_y not in ("up", "down"):
+        raise RanadError(f"--motion-y {motion_y!r}: use up or down", None)
+    if motion_units == "velocity" and not fps:
+        raise RanadError("--motion-units velocity needs --fps (frames per second)", None)
+    if fps is not None and not (np.isfinite(fps) and fps > 0):
+        raise RanadError(f"--fps {fps}: must be a positive number", None)
+    if fps is not None and motion_units != "velocity":
+        raise RanadError("--fps only applies to --motion-units velocity", None)
+    if shutter is not None:
+        if motion_units == "velocity":
+            raise RanadError("--shutter applies to displacements (pixels, ndc), not to velocities", None)
+        if not (np.isfinite(shutter) and shutter > 0):
+            raise RanadError(f"--shutter {shutter}: must be a positive number of frames", None)
+    if given:
+        out["motion"] = {"units": motion_units, "fps": fps, "shutter": shutter, "y": motion_y}
     return out
 
 
@@ -106,23 +277,73 @@ def detect(img: DeepImage, overrides: dict | None = None, source: str | None = N
     return detect_names(img.channels, overrides, source)
 
 
+def _resolve(ch: list, key: str, val, source):
+    """Channels of one mapping value (see `_parse_value`; lists from JSON are channel tuples); None: not found."""
+    kind = "xy" if key in MOTION_LAYERS else ("xyz" if key == "normal" else "rgb")
+    if isinstance(val, dict):
+        parts = [_resolve(ch, key, v, source) for v in val["sum"]]
+        return None if any(p is None for p in parts) else tuple(parts)
+    if isinstance(val, str):
+        return _find_layer(ch, (val,), kind)
+    val = tuple(val)
+    return val if all(c in ch for c in val) else None
+
+
 def detect_names(channels, overrides: dict | None = None, source: str | None = None) -> ChannelMap:
     """The ChannelMap of a list of value channel names (what `ranad info` shows before any pixel is read)."""
+    from .presets import PRESETS
+
     ch = list(channels)
+    opts = dict(overrides or {})
     missing = [c for c in ("R", "G", "B", "A", "Z") if c not in ch]
     if missing:
         raise RanadError(f"missing required channel(s) {', '.join(missing)} (have {', '.join(ch)})", source)
     m = ChannelMap(depth_back="ZBack" if "ZBack" in ch else None, coverage="coverage" if "coverage" in ch else None)
+    preset = PRESETS.get(opts.get("preset")) if opts.get("preset") else None
     for layer, names in ALIASES.items():
+        found = None
+        for val in (preset.layers.get(layer, ()) if preset else ()):
+            found = _resolve(ch, layer, val, source)
+            if found:
+                break
         kind = "xyz" if layer == "normal" else "rgb"
-        m.layers[layer] = _find_layer(ch, names, kind)
-    for layer, val in (overrides or {}).items():
-        kind = "xyz" if layer == "normal" else "rgb"
-        found = _find_layer(ch, (val,), kind) if isinstance(val, str) else (val if all(c in ch for c in val) else None)
+        m.layers[layer] = found or _find_layer(ch, names, kind)
+    motion = {k: _find_layer(ch, (k,), "xy") for k in MOTION_LAYERS}
+    conv = dict(opts.get("motion") or {})
+    if preset:
+        m.preset = preset.name
+        for k in MOTION_LAYERS:
+            for val in preset.motion.get(k, ()):
+                found = _resolve(ch, k, val, source)
+                if found:
+                    motion[k] = found
+                    break
+        if "motion" not in opts:
+            conv = dict(preset.motion_conversion)
+    for key, val in opts.items():
+        if key not in ALIASES and key not in MOTION_LAYERS:
+            continue
+        found = _resolve(ch, key, val, source)
         if found is None:
-            raise RanadError(f"--map {layer}={val if isinstance(val, str) else ','.join(val)}: no such channels", source)
-        m.layers[layer] = found
+            raise RanadError(f"--map {key}={_show(val)}: no such channels (have {', '.join(ch)})", source)
+        if key in MOTION_LAYERS:
+            motion[key] = found
+        else:
+            m.layers[key] = found
+    m.motion = MotionSpec(prev=motion["motion_prev"], next=motion["motion_next"], units=conv.get("units") or "pixels",
+                          fps=conv.get("fps"), shutter=conv.get("shutter") or 1.0, y_up=conv.get("y") == "up")
     return m
+
+
+def _show(val) -> str:
+    if isinstance(val, dict):
+        return "+".join(_show(v) for v in val["sum"])
+    return val if isinstance(val, str) else ",".join(val)
+
+
+def motion_candidates(channels) -> list:
+    """Channels whose names suggest motion data (for the warning when no motion is mapped)."""
+    return [c for c in channels if any(h in c.split(".")[0].lower() for h in MOTION_HINTS)]
 
 
 def canonical(img: DeepImage, m: ChannelMap) -> tuple[DeepImage, np.ndarray | None]:
@@ -137,8 +358,7 @@ def canonical(img: DeepImage, m: ChannelMap) -> tuple[DeepImage, np.ndarray | No
         cols.append(np.asarray(data, np.float32))
 
     def get(layer):
-        chans = m.layers.get(layer)
-        return None if not chans else np.stack([img.channel(c) for c in chans], 1)
+        return layer_values(img, m.layers.get(layer))
 
     beauty = np.stack([img.channel(c) for c in m.beauty], 1)
     emission = get("emission")

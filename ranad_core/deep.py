@@ -425,6 +425,25 @@ def _sort_bins(pix: np.ndarray, z: np.ndarray, zb: np.ndarray) -> np.ndarray:
     return perm
 
 
+def replace_nonfinite(image: DeepImage, depth: Sequence[str] = ("Z", "ZBack")) -> tuple[DeepImage, int]:
+    """ranad's one NaN/Inf policy, for every value channel: a non-finite depth (the channels named in `depth`)
+    becomes that channel's largest finite value in the image (0 if it has none), any other non-finite value 0.
+    Returns (the image, unchanged when all values are finite; the number of bins that had a non-finite value)."""
+    vals = image.values
+    bad = ~np.isfinite(vals)
+    if not bad.any():
+        return image, 0
+    n = int(bad.any(axis=1).sum())
+    vals = vals.copy()
+    for col in depth:
+        if col in image.channels:
+            j = image.channels.index(col)
+            fin = np.isfinite(vals[:, j])
+            vals[~fin, j] = vals[fin, j].max() if fin.any() else 0.0
+    vals[~np.isfinite(vals)] = 0.0
+    return image.with_values(vals), n
+
+
 def gather_bins(image: DeepImage, bin_indices: np.ndarray, offsets: np.ndarray,
                 data_window: Window | None = None) -> DeepImage:
     """A new image whose bins are ``image``'s bins ``bin_indices`` (values and ids), laid out by ``offsets``.

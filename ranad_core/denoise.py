@@ -24,8 +24,8 @@ from dataclasses import dataclass, field
 import numpy as np
 import torch
 
-from .channels import ChannelMap, canonical, detect
-from .deep import DeepImage, unsort
+from .channels import ChannelMap, canonical, detect, layer_values, split_layer
+from .deep import DeepImage, replace_nonfinite, unsort
 from .model.inputs import depth_stats, prepare
 
 ALIGN = 16                 # tile origins: multiples of the position encoding's longest period
@@ -120,20 +120,9 @@ def choose_tile(offsets: np.ndarray, width: int, height: int, halo: int, budget_
     return ALIGN
 
 
-def _fix_nonfinite(img: DeepImage) -> tuple[DeepImage, int]:
-    vals = img.values
-    bad = ~np.isfinite(vals)
-    if not bad.any():
-        return img, 0
-    n = int(bad.any(axis=1).sum())
-    vals = vals.copy()
-    for col in ("Z", "ZBack"):
-        if col in img.channels:
-            j = img.channels.index(col)
-            fin = np.isfinite(vals[:, j])
-            vals[~fin, j] = vals[fin, j].max() if fin.any() else 0.0
-    vals[~np.isfinite(vals)] = 0.0
-    return img.with_values(vals), n
+def _fix_nonfinite(img: DeepImage, depth=("Z", "ZBack")) -> tuple[DeepImage, int]:
+    """The NaN/Inf policy (deep.replace_nonfinite) on the canonical image the model reads."""
+    return replace_nonfinite(img, depth)
 
 
 @dataclass
@@ -207,7 +196,7 @@ def denoise_window(model, images: list, centre: int, mapping: ChannelMap | None 
         images, centre = [images[centre]], 0
     img = images[centre]
     mapping = mapping or detect(img)
-    moved, dropped = compensate(images, centre) if len(images) > 1 else (images, 0)
+    moved, dropped = compensate(images, centre, motion=mapping.motion) if len(images) > 1 else (images, 0)
     frames = [_model_frame(m, mapping, model_features(model)) for m in moved]
     c = frames[centre]
     n = c.srt.num_bins
@@ -257,6 +246,7 @@ def denoise_window(model, images: list, centre: int, mapping: ChannelMap | None 
 def _assemble(img: DeepImage, m: ChannelMap, srt: DeepImage, perm: np.ndarray, outs: dict,
               keep_noisy: str | None) -> DeepImage:
     """The output image: the file's channels with the denoised layers written back (file bin order)."""
+    img = replace_nonfinite(img, m.depth_channels())[0]    # one NaN/Inf policy for every channel of the output
     file_vals = img.values.copy()
     ch = img.channels
     replaced = []
@@ -268,12 +258,14 @@ def _assemble(img: DeepImage, m: ChannelMap, srt: DeepImage, perm: np.ndarray, o
 
     back = lambda a: unsort(a, perm)  # noqa: E731  sorted order -> file order
     diffuse = back(outs["diffuse"])
-    emission = np.stack([img.channel(c) for c in m.layers["emission"]], 1) if m.layers.get("emission") else 0
-    emission = np.nan_to_num(emission, nan=0.0, posinf=0.0, neginf=0.0)
+    emission = layer_values(img, m.layers.get("emission"))
+    emission = 0 if emission is None else emission
     if m.split:
-        write(m.layers["diffuse"], diffuse[:, :3])
+        for chans, part in split_layer(img, m.layers["diffuse"], diffuse[:, :3]):
+            write(chans, part)
         specular = back(outs["specular"])
-        write(m.layers["specular"], specular)
+        for chans, part in split_layer(img, m.layers["specular"], specular):
+            write(chans, part)
         beauty = diffuse[:, :3] + specular + emission + diffuse[:, 3:6]
     else:
         beauty = diffuse[:, :3] + emission

@@ -1,48 +1,69 @@
 """Motion compensation of deep frames onto a centre frame (paper Sec. 4.2): every bin of a neighbouring frame is
 re-bucketed into the centre frame's pixel where its surface point is at the centre frame's time.
 
-Channel conventions (what `ranad synth` writes, in pixels, x right, y down):
+Where motion comes from (channel names and unit conversion live in channels.py, `MotionSpec`):
 
-- per-bin motion: `motion_prev.X/Y` (offset to the bin's position in the previous frame) and `motion_next.X/Y`
-  (in the next frame). A frame before the centre moves by its `motion_next`, one after by its `motion_prev`.
-- per-pixel flow (when the deep file has no per-bin motion): flat images with the same channel names, one per
-  frame, given as arrays [H, W, 4] in the order motion_prev.X, motion_prev.Y, motion_next.X, motion_next.Y
-  (`read_flow`); every bin of a pixel moves with its pixel.
-- neither: no motion (the frames are assumed aligned).
+- per-bin motion in canonical form (pixels per frame, x right, y down): `motion_prev` (offset to the bin's
+  position in the previous frame) and `motion_next` (in the next frame); by default the channels
+  `motion_prev.X/Y` and `motion_next.X/Y` (what `ranad synth` writes), or any two channels a `--map` or a
+  `--preset` names, converted from pixels, NDC or per-second velocity and y up or down. A frame before the
+  centre moves by its `motion_next`, one after by its `motion_prev`.
+- one direction is enough. Without `motion_next`, a frame k before the centre is carried with frame k+1's
+  `motion_prev` vectors: every bin of frame k+1 says where its surface was in frame k, so a bin of frame k takes
+  (minus) the vector of the frame k+1 bin that lands on its pixel with the closest depth, or, where none lands,
+  the inverted per-pixel field (the front-most landing bin's, holes filled from their neighbours). Symmetrically
+  without `motion_prev`, a frame after the centre is carried back with frame k-1's `motion_next`.
+- per-pixel flow (when the deep file has no per-bin motion): arrays [H, W, 4] per frame in the order
+  motion_prev.X, motion_prev.Y, motion_next.X, motion_next.Y; every bin of a pixel moves with its pixel.
+- none of these: no motion (the frames are assumed aligned; `ranad denoise` warns).
 
 Frames two or more steps away are moved hop by hop: the first hop with the frame's own motion, each further hop
-with the intermediate frame's dominant per-pixel motion at the position reached (the motion of the bin that
-contributes most to that pixel), or the previous hop's motion again where that pixel is empty. Bins that leave the frame are dropped and counted. Within a target pixel the
-moved bins keep their frame's relative order; the model sorts by depth anyway.
+with the motion of the intermediate frame's bin at the position reached whose depth is closest (and whose
+object id is the same, where frames have ids), else that pixel's dominant motion (the bin that contributes most
+to it), or the previous hop's motion again where the pixel is empty. Bins that leave
+the frame are dropped and counted. Within a target pixel the moved bins keep their frame's relative order; the
+model sorts by depth anyway.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
+from .channels import CANONICAL_MOTION, MotionSpec
 from .deep import DeepImage, gather_bins
 
 PREV, NEXT = "motion_prev", "motion_next"
-FLOW_CHANNELS = (f"{PREV}.X", f"{PREV}.Y", f"{NEXT}.X", f"{NEXT}.Y")
+FLOW_CHANNELS = (*CANONICAL_MOTION[PREV], *CANONICAL_MOTION[NEXT])
+ALPHA, DEPTH = "A", "Z"               # required channels (channels.detect refuses frames without them)
+MATCH_DEPTH = float(np.log(2.0))      # a carried-back bin only takes the vector of a bin within 2x its depth
+MATCH_RADIUS = 3                      # ... landing within this many pixels of its pixel centre (nearest first)
+FILL_STEPS = 16                       # hole filling of inverted fields: neighbour averaging rounds
 
 
-def has_bin_motion(img: DeepImage) -> bool:
-    return all(c in img.channels for c in FLOW_CHANNELS)
+def has_bin_motion(img: DeepImage, motion: MotionSpec | None = None) -> bool:
+    """Both directions of per-bin motion present."""
+    spec = motion or MotionSpec.canonical()
+    return spec.vectors(img, PREV) is not None and spec.vectors(img, NEXT) is not None
 
 
-def bin_motion(img: DeepImage, name: str) -> np.ndarray:
-    """[N, 2] per-bin motion (dx, dy) of channel layer `name` (motion_prev or motion_next)."""
-    return np.stack([img.channel(f"{name}.X"), img.channel(f"{name}.Y")], 1).astype(np.float32)
+def has_any_motion(frames: list, motion: MotionSpec | None = None, flows: list | None = None) -> bool:
+    """Whether any frame of a window carries motion in either direction (per bin or per-pixel flow)."""
+    spec = motion or MotionSpec.canonical()
+    if any(spec.vectors(f, d) is not None for f in frames for d in (PREV, NEXT)):
+        return True
+    return bool(flows) and any(f is not None for f in flows)
 
 
-def dominant_flow(img: DeepImage, name: str) -> np.ndarray:
-    """[H, W, 2] per-pixel motion: the motion of the bin with the largest visible contribution (T_i * alpha_i);
-    NaN where the pixel has no bins."""
-    flow = np.full((img.num_pixels, 2), np.nan, np.float32)
-    if img.num_bins == 0:
-        return flow.reshape(img.height, img.width, 2)
+def bin_motion(img: DeepImage, name: str, motion: MotionSpec | None = None) -> np.ndarray | None:
+    """[N, 2] canonical per-bin motion (dx, dy) towards `name` (motion_prev or motion_next), None if absent."""
+    return (motion or MotionSpec.canonical()).vectors(img, name)
+
+
+def _heads(img: DeepImage) -> tuple[np.ndarray, np.ndarray]:
+    """(bin index in `img`, pixel) of each covered pixel's bin with the largest visible contribution
+    (T_i * alpha_i, the transmittance in front of it times its alpha)."""
     srt, perm = img.sorted()
-    a = np.clip(srt.channel("A"), 0, 1).astype(np.float32)
+    a = np.clip(np.nan_to_num(srt.channel(ALPHA)), 0, 1).astype(np.float32)
     pix = srt.pixel_index()
     logt = np.log1p(-np.minimum(a, 1 - 1e-6)).astype(np.float64)
     excl = np.cumsum(logt) - logt                           # sum over all earlier bins of the image
@@ -50,24 +71,233 @@ def dominant_flow(img: DeepImage, name: str) -> np.ndarray:
     weight = np.exp(before) * a
     order = np.lexsort((-weight, pix))                      # per pixel, the heaviest bin first
     heads = order[np.r_[True, pix[order][1:] != pix[order][:-1]]]
-    flow[pix[heads]] = bin_motion(srt, name)[heads]
+    return perm[heads], pix[heads]
+
+
+def dominant_flow(img: DeepImage, name_or_vectors, motion: MotionSpec | None = None) -> np.ndarray:
+    """[H, W, 2] per-pixel motion: the motion of the bin with the largest visible contribution (T_i * alpha_i);
+    NaN where the pixel has no bins. `name_or_vectors`: a direction name, or [N, 2] per-bin vectors."""
+    flow = np.full((img.num_pixels, 2), np.nan, np.float32)
+    vec = (bin_motion(img, name_or_vectors, motion) if isinstance(name_or_vectors, str)
+           else np.asarray(name_or_vectors, np.float32))
+    if img.num_bins and vec is not None:
+        b, p = _heads(img)
+        flow[p] = vec[b]
     return flow.reshape(img.height, img.width, 2)
+
+
+def _targets(img: DeepImage, dxy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(target pixel of every bin moved by dxy, rounded to the nearest; whether it is inside the frame)."""
+    w, h = img.width, img.height
+    y, x = np.divmod(img.pixel_index(), w)
+    tx = np.floor(x + dxy[:, 0] + 0.5).astype(np.int64)
+    ty = np.floor(y + dxy[:, 1] + 0.5).astype(np.int64)
+    inside = (tx >= 0) & (tx < w) & (ty >= 0) & (ty < h)
+    return np.where(inside, ty * w + tx, -1), inside
 
 
 def rebucket(img: DeepImage, dxy: np.ndarray) -> tuple[DeepImage, int]:
     """Move every bin by dxy [N, 2] pixels to the nearest pixel; returns (moved image, bins dropped at borders)."""
-    w, h = img.width, img.height
-    pix = img.pixel_index()
-    y, x = np.divmod(pix, w)
-    tx = np.floor(x + dxy[:, 0] + 0.5).astype(np.int64)
-    ty = np.floor(y + dxy[:, 1] + 0.5).astype(np.int64)
-    inside = (tx >= 0) & (tx < w) & (ty >= 0) & (ty < h)
+    target, inside = _targets(img, dxy)
     keep = np.flatnonzero(inside)
-    target = ty[keep] * w + tx[keep]
+    target = target[keep]
     order = keep[np.argsort(target, kind="stable")]
-    counts = np.bincount(target, minlength=w * h)
+    counts = np.bincount(target, minlength=img.width * img.height)
     offsets = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
-    return gather_bins(img, order, offsets), int(len(pix) - len(keep))
+    return gather_bins(img, order, offsets), int(img.num_bins - len(keep))
+
+
+def _fill_holes(field: np.ndarray, steps: int = FILL_STEPS) -> np.ndarray:
+    """NaN pixels of a [H, W, 2] field take the mean of their valid 8-neighbours, repeatedly; what is still
+    empty after `steps` rounds (far from any data) stays NaN."""
+    f = field.astype(np.float64).copy()
+    for _ in range(steps):
+        bad = np.isnan(f[..., 0])
+        if not bad.any():
+            break
+        valid = (~bad).astype(np.float64)
+        vals = np.where(bad[..., None], 0.0, f)
+        pv = np.pad(valid, 1)
+        pf = np.pad(vals, ((1, 1), (1, 1), (0, 0)))
+        h, w = bad.shape
+        cnt = sum(pv[1 + dy:1 + dy + h, 1 + dx:1 + dx + w] for dy in (-1, 0, 1) for dx in (-1, 0, 1))
+        tot = sum(pf[1 + dy:1 + dy + h, 1 + dx:1 + dx + w] for dy in (-1, 0, 1) for dx in (-1, 0, 1))
+        fill = bad & (cnt > 0)
+        if not fill.any():
+            break
+        f[fill] = tot[fill] / cnt[fill][:, None]
+    return f.astype(np.float32)
+
+
+def _object_ids(img: DeepImage):
+    from .exr.inspect import object_id_channel
+
+    name = object_id_channel(img)
+    return None if name is None else img.ids[name]
+
+
+def _log_depth(img: DeepImage) -> np.ndarray:
+    z = np.nan_to_num(img.channel(DEPTH).astype(np.float64), nan=1e30, posinf=1e30)
+    return np.log(np.maximum(z, 1e-6))
+
+
+class _Candidates:
+    """Bins of one frame placed at (sub-pixel) positions, sorted by the pixel they fall in, for `match`."""
+
+    def __init__(self, img: DeepImage, xy: np.ndarray, rows: np.ndarray | None = None):
+        w, h = img.width, img.height
+        rows = np.arange(img.num_bins) if rows is None else rows
+        xy = np.asarray(xy, np.float64)[rows]
+        tx, ty = np.floor(xy[:, 0] + 0.5).astype(np.int64), np.floor(xy[:, 1] + 0.5).astype(np.int64)
+        inside = (tx >= 0) & (tx < w) & (ty >= 0) & (ty < h)
+        rows, xy, pix = rows[inside], xy[inside], (ty * w + tx)[inside]
+        logz = _log_depth(img)[rows]
+        order = np.lexsort((logz, pix))                   # by pixel, front-most first
+        self.rows, self.xy, self.pix, self.logz = rows[order], xy[order], pix[order], logz[order]
+        ids = _object_ids(img)
+        self.ids = None if ids is None else ids[self.rows]
+        self.w, self.h = w, h
+
+    def front(self) -> tuple[np.ndarray, np.ndarray]:
+        """(pixel, bin) of the front-most bin in every pixel that has one."""
+        first = np.r_[True, self.pix[1:] != self.pix[:-1]] if self.pix.size else np.zeros(0, bool)
+        return self.pix[first], self.rows[first]
+
+    def match(self, xy: np.ndarray, logz: np.ndarray, ids: np.ndarray | None, radius: int) -> np.ndarray:
+        """For each query (position [Q, 2], log depth, object id), the candidate bin nearest to it among those
+        within `radius` pixels, MATCH_DEPTH in log depth and of the same id (where both have ids); cost:
+        distance + log-depth difference. Returns bin indices, -1 where none qualifies. Pixels within one ring
+        are searched for every query, wider rings only for the queries still unmatched."""
+        n = len(logz)
+        best_cost, best = np.full(n, np.inf), np.full(n, -1, np.int64)
+        if n == 0 or self.pix.size == 0:
+            return best
+        qx, qy = np.floor(xy[:, 0] + 0.5).astype(np.int64), np.floor(xy[:, 1] + 0.5).astype(np.int64)
+        ids = ids if self.ids is not None else None
+        rings = [[(0, 0)]] + [[(oy, ox) for oy in range(-r, r + 1) for ox in range(-r, r + 1) if max(abs(oy), abs(ox)) == r]
+                              for r in range(1, radius + 1)]
+        stages = [sum(rings[:2], [])] + rings[2:]           # the pixel and its 8 neighbours, then wider rings
+        for stage, offsets in enumerate(stages):
+            rows = np.arange(n) if stage == 0 else np.flatnonzero(best < 0)
+            for oy, ox in offsets:
+                cx, cy = qx[rows] + ox, qy[rows] + oy
+                ok = (cx >= 0) & (cx < self.w) & (cy >= 0) & (cy < self.h)
+                cell = np.where(ok, cy * self.w + cx, -1)
+                lo = np.searchsorted(self.pix, cell, "left")
+                cnt = np.where(ok, np.searchsorted(self.pix, cell, "right") - lo, 0)
+                i = np.repeat(rows, cnt)
+                if not i.size:
+                    continue
+                k = np.repeat(lo - np.concatenate([[0], np.cumsum(cnt)[:-1]]), cnt) + np.arange(i.size)
+                dz = np.abs(logz[i] - self.logz[k])
+                dist = np.hypot(self.xy[k, 0] - xy[i, 0], self.xy[k, 1] - xy[i, 1])
+                good = (dz <= MATCH_DEPTH) & (dist <= radius + 0.75)
+                if ids is not None:
+                    good &= self.ids[k] == ids[i]
+                cost = np.where(good, dist + dz, np.inf)
+                better = cost < best_cost[i]
+                # several candidates of one query may improve it: write in descending cost, the cheapest lands last
+                o = np.argsort(-cost[better], kind="stable")
+                ib, kb = i[better][o], k[better][o]
+                best_cost[ib] = cost[better][o]
+                best[ib] = kb
+        hit = best >= 0
+        best[hit] = self.rows[best[hit]]
+        return best
+
+
+def _pixel_xy(img: DeepImage) -> np.ndarray:
+    y, x = np.divmod(img.pixel_index(), img.width)
+    return np.stack([x, y], 1).astype(np.float64)
+
+
+def _inverse(src: DeepImage, dst: DeepImage, dst_vec: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Motion of `src`'s bins to the frame `dst`, from `dst`'s per-bin vectors that point from each `dst` bin to
+    its position in `src` (the other direction). Returns ([N_src, 2] per-bin motion: minus the vector of the
+    `dst` bin that lands nearest the bin's pixel centre (within MATCH_RADIUS pixels), within MATCH_DEPTH of its
+    log depth and with the same object id where both frames have ids; NaN where none does) and [H, W, 2] the
+    per-pixel field of `src`: the front-most landing bin's inverted vector, holes filled from their neighbours."""
+    h, w = src.height, src.width
+    field = np.full((h * w, 2), np.nan, np.float32)
+    per_bin = np.full((src.num_bins, 2), np.nan, np.float32)
+    if dst.num_bins == 0:
+        return per_bin, field.reshape(h, w, 2)
+    landing = _Candidates(dst, _pixel_xy(dst) + dst_vec)
+    pix, rows = landing.front()
+    field[pix] = -dst_vec[rows]
+    field = _fill_holes(field.reshape(h, w, 2))
+    if src.num_bins:
+        best = landing.match(_pixel_xy(src), _log_depth(src), _object_ids(src), MATCH_RADIUS)
+        hit = best >= 0
+        per_bin[hit] = -dst_vec[best[hit]]
+    return per_bin, field
+
+
+class _Window:
+    """The motion of a window's frames, per bin and per pixel, each computed once."""
+
+    def __init__(self, frames: list, motion: MotionSpec | None, flows: list | None):
+        self.frames, self.spec, self.flows = frames, motion or MotionSpec.canonical(), flows
+        self._vec, self._field, self._inv, self._bins, self._cand = {}, {}, {}, {}, {}
+
+    def vectors(self, k: int, name: str):
+        if (k, name) not in self._vec:
+            self._vec[k, name] = self.spec.vectors(self.frames[k], name)
+        return self._vec[k, name]
+
+    def inverse(self, k: int, name: str):
+        """Frame k's motion towards `name` from its neighbour's opposite vectors, or None."""
+        if (k, name) not in self._inv:
+            other = k + (1 if name == NEXT else -1)
+            back = PREV if name == NEXT else NEXT
+            vec = self.vectors(other, back) if 0 <= other < len(self.frames) else None
+            self._inv[k, name] = None if vec is None else _inverse(self.frames[k], self.frames[other], vec)
+        return self._inv[k, name]
+
+    def field(self, k: int, name: str):
+        """[H, W, 2] per-pixel motion of frame k towards `name`, or None."""
+        if (k, name) not in self._field:
+            f, vec = None, self.vectors(k, name)
+            if vec is not None:
+                f = dominant_flow(self.frames[k], vec)
+            elif self.inverse(k, name) is not None:
+                f = self.inverse(k, name)[1]
+            elif self.flows is not None and self.flows[k] is not None:
+                col = 2 if name == NEXT else 0
+                f = np.asarray(self.flows[k], np.float32)[..., col:col + 2]
+            self._field[k, name] = f
+        return self._field[k, name]
+
+    def per_bin(self, k: int, name: str) -> np.ndarray | None:
+        """[N, 2] motion of frame k's bins towards `name` (own vectors, carried back, or per pixel), or None."""
+        if (k, name) not in self._bins:
+            img, d = self.frames[k], None
+            vec = self.vectors(k, name)
+            if vec is not None:
+                d = vec.astype(np.float64)
+            elif self.inverse(k, name) is not None:
+                per_bin, field = self.inverse(k, name)
+                at_pixel = field.reshape(-1, 2)[img.pixel_index()]
+                d = np.nan_to_num(np.where(np.isnan(per_bin), at_pixel, per_bin)).astype(np.float64)
+            elif self.field(k, name) is not None:
+                d = np.nan_to_num(self.field(k, name).reshape(-1, 2)[img.pixel_index()]).astype(np.float64)
+            self._bins[k, name] = d
+        return self._bins[k, name]
+
+    def hop(self, k: int, name: str, xy: np.ndarray, logz: np.ndarray, ids) -> np.ndarray | None:
+        """[Q, 2] motion towards `name` of bins that reached positions `xy` in frame k: the motion of frame k's
+        bin at that pixel with the closest depth (and the same id), else the per-pixel field there (NaN where
+        that is empty too); None when frame k has no motion towards `name`."""
+        d = self.per_bin(k, name)
+        if d is None:
+            return None
+        if k not in self._cand:
+            self._cand[k] = _Candidates(self.frames[k], _pixel_xy(self.frames[k]))
+        best = self._cand[k].match(xy, logz, ids, 0)
+        out = _sample(self.field(k, name), xy[:, 0], xy[:, 1]).astype(np.float64)
+        hit = best >= 0
+        out[hit] = d[best[hit]]
+        return out
 
 
 def _sample(flow: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.ndarray:
@@ -77,51 +307,43 @@ def _sample(flow: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.ndarray:
     return flow[yi, xi]
 
 
-def displacement(frames: list, index: int, centre: int, flows: list | None = None) -> np.ndarray:
-    """[N, 2] offsets that carry frame `index`'s bins to frame `centre` (zeros without motion data)."""
+def displacement(frames: list, index: int, centre: int, flows: list | None = None,
+                 motion: MotionSpec | None = None, _win: _Window | None = None) -> np.ndarray:
+    """[N, 2] offsets that carry frame `index`'s bins to frame `centre` (zeros without motion data).
+    `motion`: which channels hold the motion and how to convert them (default: ranad's canonical channels)."""
+    win = _win or _Window(frames, motion, flows)
     img = frames[index]
     n = img.num_bins
     if index == centre:
         return np.zeros((n, 2), np.float32)
     step = 1 if index < centre else -1
     name = NEXT if step > 0 else PREV
-    col = 2 if step > 0 else 0
-
-    def per_pixel(k):
-        if has_bin_motion(frames[k]):
-            return dominant_flow(frames[k], name)
-        if flows is not None and flows[k] is not None:
-            return np.asarray(flows[k], np.float32)[..., col:col + 2]
-        return None
-
-    if has_bin_motion(img):
-        d = bin_motion(img, name)
-    else:
-        f = per_pixel(index)
-        if f is None:
-            return np.zeros((n, 2), np.float32)
-        d = np.nan_to_num(f.reshape(-1, 2)[img.pixel_index()])
-    y, x = np.divmod(img.pixel_index(), img.width)
-    d = np.nan_to_num(d.astype(np.float64))
+    d = win.per_bin(index, name)
+    if d is None:
+        return np.zeros((n, 2), np.float32)
+    pos = _pixel_xy(img)
+    logz, ids = _log_depth(img), _object_ids(img)
     hop = d.copy()
     for k in range(index + step, centre, step):
-        f = per_pixel(k)
-        if f is None:
+        nxt = win.hop(k, name, pos + d, logz, ids)
+        if nxt is None:
             break
-        nxt = _sample(f, x + d[:, 0], y + d[:, 1]).astype(np.float64)
         hop = np.where(np.isnan(nxt), hop, nxt)            # empty pixel: keep moving as before
         d = d + hop
     return d.astype(np.float32)
 
 
-def compensate(frames: list, centre: int, flows: list | None = None) -> tuple[list, int]:
-    """Every frame of a window moved onto frame `centre`; returns (frames, bins dropped in all)."""
+def compensate(frames: list, centre: int, flows: list | None = None,
+               motion: MotionSpec | None = None) -> tuple[list, int]:
+    """Every frame of a window moved onto frame `centre`; returns (frames, bins dropped in all).
+    `motion`: the MotionSpec of the shot's channel map (default: ranad's canonical motion channels)."""
+    win = _Window(frames, motion, flows)
     out, dropped = [], 0
     for i, img in enumerate(frames):
         if i == centre:
             out.append(img)
             continue
-        moved, lost = rebucket(img, displacement(frames, i, centre, flows))
+        moved, lost = rebucket(img, displacement(frames, i, centre, flows, motion, win))
         out.append(moved)
         dropped += lost
     return out, dropped

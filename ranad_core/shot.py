@@ -17,7 +17,7 @@ import time
 from dataclasses import dataclass, field
 
 from . import cache as cache_io
-from .channels import detect
+from .channels import detect, motion_candidates
 from .denoise import choose_tile, denoise_window, halo_for, is_cross_frame
 from .errors import RanadError
 from .exr import read_deep, read_header, resolve_part, write_deep
@@ -36,6 +36,7 @@ class ShotOptions:
     strict: bool = False                             # non-finite samples: error instead of fix
     window: int = 1                                  # frames per window (cross-frame models only)
     aovs: str | None = None                          # glob of AOV layers denoised with the same kernels
+    kind: str = "auto"                               # deepz / deepoid: every frame must be of that kind
 
 
 @dataclass
@@ -44,8 +45,10 @@ class ShotSummary:
     skipped: int = 0
     bins: int = 0
     nonfinite: int = 0
+    dropped: int = 0                                 # neighbour bins motion carried out of the frame
     seconds: float = 0.0
     messages: list = field(default_factory=list)
+    no_motion: bool = False                          # a cross-frame window ran without any motion data
 
 
 def prescan(frames) -> None:
@@ -122,12 +125,50 @@ class FrameStore:
         return img
 
 
+KINDS = ("auto", "deepz", "deepoid")
+
+
+def count_nonfinite(img) -> int:
+    """Bins with a NaN/Inf value in any channel (what deep.replace_nonfinite replaces)."""
+    import numpy as np
+
+    return int((~np.isfinite(img.values)).any(axis=1).sum()) if img.num_bins else 0
+
+
+def check_kind(img, kind: str, source: str) -> str:
+    """The frame's kind ('deepz' or 'deepoid', inspect.guess_kind's rule); with `kind` other than auto a frame
+    of the other kind is a RanadError naming it (`--kind` states what the shot must be, and is checked)."""
+    from .exr.inspect import guess_kind, object_id_channel
+
+    if kind not in KINDS:
+        raise RanadError(f"--kind {kind!r}: use one of {', '.join(KINDS)}", None)
+    found = "deepoid" if guess_kind(img) == "deep-OID" else "deepz"
+    if kind == "deepoid" and found != kind:
+        why = ("it has no id channel" if object_id_channel(img) is None
+               else f"its id channel {object_id_channel(img)!r} repeats within pixels")
+        raise RanadError(f"--kind deepoid: not a deep-OID frame ({why})", source)
+    if kind == "deepz" and found != kind:
+        raise RanadError(f"--kind deepz: this is a deep-OID frame (id {object_id_channel(img)!r} separates every "
+                         "pixel's bins); use --kind deepoid or auto", source)
+    return found
+
+
+def no_motion_message(img, model_name: str = "the cross-frame model") -> str:
+    """The warning for a cross-frame window without any motion data (once per shot)."""
+    hint = motion_candidates(img.channels)
+    return (f"{model_name} runs WITHOUT motion compensation: no per-bin motion channels are mapped, so moving "
+            "objects are blurred across frames. "
+            + (f"Channels that may hold motion: {', '.join(hint)}. " if hint else "")
+            + "Map them with --map motion_prev=X,Y (and/or motion_next=X,Y, with --motion-units/--motion-y), "
+              "use --preset RENDERER, or --window 1 to denoise frames alone.")
+
+
 def denoise_shot(jobs, loaded, opts: ShotOptions, frame_bar=None, tile_bar=None, on_frame=None,
-                 sequence: list | None = None) -> ShotSummary:
+                 sequence: list | None = None, warn=None) -> ShotSummary:
     """jobs: [(Frame, output path)]; loaded: model.store.LoadedModel; `sequence`: every frame of the shot (the
     neighbours of a shard's frames; default: the jobs' frames). `frame_bar`/`tile_bar`: callables (n) for
     progress; `tile_bar.reset(total)` is called per frame when present. `on_frame(job, image, result)` is called
-    after each frame is written."""
+    after each frame is written; `warn(message)` as soon as a warning arises (it is kept in the summary too)."""
     summary = ShotSummary()
     model = loaded.model
     halo = halo_for(model) if opts.halo is None else opts.halo
@@ -151,6 +192,19 @@ def denoise_shot(jobs, loaded, opts: ShotOptions, frame_bar=None, tile_bar=None,
             raise RanadError(f"data window {img.data_window} differs from {first[1]} of {first[0]} "
                              "(frames of a sequence must match)", frame.path)
         mapping = detect(img, opts.overrides, frame.path)
+        check_kind(img, opts.kind, frame.path)
+        bad = count_nonfinite(img)                  # every channel, not only those the model reads
+        if bad and opts.strict:
+            raise RanadError(f"{bad} bin(s) with NaN/Inf values", frame.path)
+        if len(images) > 1 and not summary.no_motion:
+            from .motion import has_any_motion
+
+            if not has_any_motion(images, mapping.motion):
+                summary.no_motion = True
+                msg = no_motion_message(img)
+                summary.messages.append(msg)
+                if warn:
+                    warn(msg)
         for f, other in zip(members, images):
             if other.data_window != img.data_window:
                 raise RanadError(f"data window {other.data_window} differs from {img.data_window} of {frame.path} "
@@ -164,11 +218,13 @@ def denoise_shot(jobs, loaded, opts: ShotOptions, frame_bar=None, tile_bar=None,
                                 opts.cache_dir is not None or bool(opts.aovs), tile_bar)
         if opts.aovs:
             result.image = with_denoised_aovs(model, images, centre, mapping, result, opts.aovs, frame.path)
-        if result.nonfinite:
-            msg = f"{frame.path}: {result.nonfinite} bin(s) with NaN/Inf values"
+        nonfinite = max(result.nonfinite, bad)
+        if nonfinite:
+            msg = f"{frame.path}: {nonfinite} bin(s) with NaN/Inf values"
             if opts.strict:
-                raise RanadError(f"{result.nonfinite} bin(s) with NaN/Inf values", frame.path)
-            summary.messages.append(msg + " (replaced: colour and alpha 0, depth the frame's largest)")
+                raise RanadError(f"{nonfinite} bin(s) with NaN/Inf values", frame.path)
+            summary.messages.append(msg + " (replaced in every channel: depth with the frame's largest finite "
+                                          "depth, any other value with 0)")
         write_deep(out, result.image)
         if opts.cache_dir:
             cache_io.write_cache(cache_io.cache_path(opts.cache_dir, out), img, result, loaded.model_id,
@@ -176,7 +232,8 @@ def denoise_shot(jobs, loaded, opts: ShotOptions, frame_bar=None, tile_bar=None,
                                  [m.path for m in members] if is_cross_frame(model) else None, opts.overrides)
         summary.frames += 1
         summary.bins += result.bins
-        summary.nonfinite += result.nonfinite
+        summary.nonfinite += nonfinite
+        summary.dropped += result.dropped
         summary.seconds += time.perf_counter() - t0
         if on_frame:
             on_frame((frame, out), img, result)

@@ -61,8 +61,9 @@ def _deep_stats(image: DeepImage) -> dict[str, Any]:
     }
 
 
-def describe(path: str | os.PathLike, stats: bool = True) -> dict[str, Any]:
-    """A JSON-ready description of every part of an EXR file (deep statistics for deep parts)."""
+def describe(path: str | os.PathLike, stats: bool = True, overrides: dict | None = None) -> dict[str, Any]:
+    """A JSON-ready description of every part of an EXR file (deep statistics for deep parts). `overrides`:
+    a channels.mapping_options dict (--map, --preset), applied to what `ranad denoise` would read."""
     path = os.fspath(path)
     layout, buf = read_layout(path)
     out: dict[str, Any] = {"file": path, "file_size": os.path.getsize(path), "multipart": layout.multipart,
@@ -90,12 +91,15 @@ def describe(path: str | os.PathLike, stats: bool = True) -> dict[str, Any]:
         if tiled and part.tiles:
             info["tiles"] = list(part.tiles[:2])
         if deep:
-            from ..channels import detect_names
+            from ..channels import detect_names, motion_candidates
             from ..errors import RanadError
 
+            names = [c.name for c in part.channels if c.type != "uint"]
             try:
-                names = [c.name for c in part.channels if c.type != "uint"]
-                info["denoise_channels"] = detect_names(names).describe()
+                mapping = detect_names(names, overrides)
+                info["denoise_channels"] = mapping.describe()
+                if not mapping.motion.found:
+                    info["denoise_channels"]["motion_candidates"] = motion_candidates(names)
             except RanadError as e:
                 info["denoise_channels"] = {"mode": f"cannot denoise: {e.problem}"}
         if deep and stats:
