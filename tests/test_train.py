@@ -7,6 +7,7 @@ import shutil
 from pathlib import Path
 
 import numpy as np
+import pytest
 import torch
 from click.testing import CliRunner
 
@@ -123,31 +124,69 @@ def test_train_errors(tmp_path):
 
 
 def test_ssim_loss_sees_structure_smape_misses():
-    from ranad_core.train.losses import ssim
+    """Two images with the same SMAPE against the reference (every pixel off by a factor 1.2 or 1/1.2, which SMAPE
+    scores alike): a global brightness change keeps the structure, per-pixel factors destroy it; only SSIM tells
+    them apart. SMAPE is computed twice: by the training loss and as written out here."""
+    from ranad_core.train.losses import smape, ssim
 
     g = torch.Generator().manual_seed(0)
-    ref = torch.rand(3, 32, 32, generator=g)
-    assert abs(ssim(ref, ref).item() - 1) < 1e-5
+    ref = torch.nn.functional.avg_pool2d((0.5 + 0.5 * torch.rand(3, 32, 32, generator=g))[None], 3, 1, 1,
+                                         count_include_pad=False)[0]
+    assert abs(ssim(ref, ref).item() - 1) < 1e-5 and smape(ref, ref).item() == 0
+    brighter = ref * 1.2
+    blotchy = ref * torch.where(torch.rand(1, 32, 32, generator=g) < 0.5, 1.2, 1 / 1.2)
+
+    def smape_here(test, r, eps=1e-2):
+        t, r = test.double().numpy(), r.double().numpy()
+        return float(np.mean(np.abs(t - r) / (np.abs(t) + np.abs(r) + eps)))
+
+    for img in (brighter, blotchy):
+        assert smape(img, ref).item() == pytest.approx(smape_here(img, ref), rel=1e-5)
+        assert smape_here(img, ref) == pytest.approx(0.2 / 2.2, rel=0.02)   # |k - 1| / (k + 1) for k = 1.2, 1/1.2
+    assert smape(brighter, ref).item() == pytest.approx(smape(blotchy, ref).item(), rel=0.01)
+    assert ssim(ref, brighter).item() > 0.95 and ssim(ref, blotchy).item() < 0.5
+    # noise and blur lower SSIM too
     noisy = (ref + 0.2 * torch.randn(3, 32, 32, generator=g)).clamp(0, 1)
-    blurred = torch.nn.functional.avg_pool2d(ref[None], 3, 1, 1, count_include_pad=False)[0]
-    assert ssim(ref, noisy) < 0.9 and ssim(ref, blurred) < 0.95
+    blurred = torch.nn.functional.avg_pool2d(ref[None], 5, 1, 2, count_include_pad=False)[0]
+    assert ssim(ref, noisy) < 0.9 and ssim(ref, blurred) < ssim(ref, brighter)
 
 
 def test_data_parallel_training_averages_over_processes(tmp_path):
-    """Two gloo processes: one checkpoint, written by rank 0, and different from a one-process run of the same
-    seed (rank 1's crops moved the weights too)."""
-    from ranad_core.train.trainer import TrainConfig, spawn_local, train
+    """Two gloo processes, one step: the gradient DDP applied (AdamW's first moment in rank 0's checkpoint is
+    0.1 x the gradient; no clipping) equals the average of the two ranks' gradients computed here in one
+    process on the crops each rank draws (its own stream, seeded [seed, rank]); not their sum, not rank 0's."""
+    from ranad_core.model import get_config
+    from ranad_core.train.trainer import TrainConfig, build_model, pair_loss, spawn_local
 
     ds = dataset_from_example(tmp_path / "ds")
-    kw = dict(dataset=str(ds), steps=2, crop=16, checkpoint_every=2, log_every=1)
-    spawn_local(TrainConfig(run=str(tmp_path / "ddp"), **kw), 2, show_progress=False)
-    train(TrainConfig(run=str(tmp_path / "one"), **kw))
-    a = torch.load(tmp_path / "ddp" / "checkpoint.pt", weights_only=False)
-    b = torch.load(tmp_path / "one" / "checkpoint.pt", weights_only=False)
-    assert a["step"] == b["step"] == 2
-    assert (tmp_path / "ddp" / "train.log").read_text().count("step 2 loss") == 1
-    diff = max((a["model"][k] - b["model"][k]).abs().max().item() for k in a["model"])
-    assert diff > 1e-6
+    cfg = TrainConfig(dataset=str(ds), run=str(tmp_path / "ddp"), steps=1, crop=16, checkpoint_every=1,
+                      log_every=1, clip=1e9)
+    spawn_local(cfg, 2, show_progress=False)
+    state = torch.load(tmp_path / "ddp" / "checkpoint.pt", weights_only=False)
+    assert state["step"] == 1 and (tmp_path / "ddp" / "train.log").read_text().count("step 1 loss") == 1
+    opt = state["optimizer"]
+    exp_avg = {n: opt["state"][i]["exp_avg"] for g in opt["param_groups"] for n, i in zip(g["names"], g["params"])
+               if i in opt["state"]}
+
+    torch.manual_seed(cfg.seed)
+    model = build_model(cfg, get_config(cfg.config))
+    after_init = torch.get_rng_state()
+    names, params = zip(*model.named_parameters())
+    pairs = find_pairs(str(ds))
+    grads = []
+    for rank in (0, 1):
+        torch.set_rng_state(after_init)                       # each process's torch stream after building
+        rng = np.random.default_rng([cfg.seed, rank])
+        loss, _ = pair_loss(model, pairs[int(rng.integers(0, len(pairs)))], rng, cfg, False)
+        g = torch.autograd.grad(loss, params, allow_unused=True)
+        grads.append([torch.zeros_like(p) if x is None else x for p, x in zip(params, g)])
+    mean = {n: (a + b) / 2 for n, a, b in zip(names, *grads)}
+    scale = max(v.abs().max().item() for v in mean.values())
+    for n in names:
+        np.testing.assert_allclose(exp_avg[n].numpy(), 0.1 * mean[n].numpy(), rtol=1e-3, atol=1e-6 * scale,
+                                   err_msg=n)
+    rank0 = dict(zip(names, grads[0]))
+    assert max((0.1 * rank0[n] - exp_avg[n]).abs().max().item() for n in names) > 0.01 * scale   # rank 1 counted
 
 
 def test_reduced_modes_keep_the_radiance():
