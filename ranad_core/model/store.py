@@ -97,7 +97,7 @@ def load_model(spec: str | None = None, backend: str = "auto") -> LoadedModel:
             state = load_file(str(path))
             config = ModelConfig.from_dict(json.loads(meta["model_config"]))
         else:
-            ckpt = torch.load(path, map_location="cpu", weights_only=False)
+            ckpt = torch.load(path, map_location="cpu", weights_only=True)
             state, config = ckpt["model"], ModelConfig.from_dict(ckpt["model_config"])
             meta = checkpoint_metadata(ckpt)
     except RanadError:
@@ -130,7 +130,7 @@ def export_weights(checkpoint: str | Path, out: str | Path, extra: dict | None =
     """Write a training checkpoint's model weights as safetensors with the config and provenance metadata."""
     from safetensors.torch import save_file
 
-    ckpt = torch.load(resolve(str(checkpoint)), map_location="cpu", weights_only=False)
+    ckpt = torch.load(resolve(str(checkpoint)), map_location="cpu", weights_only=True)
     meta = checkpoint_metadata(ckpt)
     meta.update({k: str(v) for k, v in (extra or {}).items()})
     state = {k: v.contiguous() for k, v in ckpt["model"].items()}
