@@ -15,7 +15,7 @@ from ..deep import DeepImage
 from ..errors import RanadError
 from ..fileutil import atomic_output
 from . import fast, oiio_io
-from .header import ExrLayout, deep_state_code, parse_layout, read_file_bytes
+from .header import ByteSource, ExrLayout, FileSource, as_source, check_part_size, deep_state_code, read_source_layout
 
 IoMode = Literal["auto", "oiio", "fast"]
 _io_mode: IoMode = "auto"
@@ -35,28 +35,19 @@ def get_io_mode() -> IoMode:
     return _io_mode
 
 
-def read_layout(path: str | os.PathLike) -> tuple[ExrLayout, bytes]:
-    """Parse the headers of an EXR file; returns the layout and the file's bytes."""
+def read_layout(path: str | os.PathLike) -> tuple[ExrLayout, ByteSource]:
+    """Parse the headers of an EXR file, reading only the bytes they take; returns the layout and the open file
+    (a :class:`~.header.ByteSource` that :func:`read_part` reads chunks from as it needs them)."""
     path = os.fspath(path)
-    buf = read_file_bytes(path)
-    return parse_layout(buf, path), buf
+    src = FileSource(path)
+    return read_source_layout(src), src
 
 
-def read_header(path: str | os.PathLike, head_bytes: int = 1 << 18) -> ExrLayout:
-    """The headers only, from the first bytes of the file (the whole file when they are longer): cheap checks of
-    a whole sequence (deep or not, data windows, channels) before any frame is processed."""
-    path = os.fspath(path)
-    try:
-        with open(path, "rb") as f:
-            head = f.read(head_bytes)
-    except OSError as e:
-        raise RanadError(f"cannot read ({e.strerror or e})", path) from None
-    try:
-        return parse_layout(head, path)
-    except RanadError:
-        if len(head) < head_bytes:
-            raise
-        return read_layout(path)[0]
+def read_header(path: str | os.PathLike, head_bytes: int = 1 << 16) -> ExrLayout:
+    """The headers only, reading no more of the file than they take: cheap checks of a whole sequence (deep or
+    not, data windows, channels) before any frame is processed."""
+    with FileSource(os.fspath(path)) as src:
+        return read_source_layout(src, head_bytes)
 
 
 def resolve_part(layout: ExrLayout, part: int | str | None, path: str) -> int:
@@ -88,19 +79,23 @@ def read_deep(path: str | os.PathLike, part: int | str | None = None, channels: 
     ``part``: index or name (default: the first deep part); ``channels``: read only these (all by default).
     """
     path = os.fspath(path)
-    layout, buf = read_layout(path)
-    return read_part(path, layout, buf, resolve_part(layout, part, path), channels, io)
+    layout, src = read_layout(path)
+    with src:
+        return read_part(path, layout, src, resolve_part(layout, part, path), channels, io)
 
 
-def read_part(path: str, layout: ExrLayout, buf: bytes, index: int, channels: list[str] | None = None,
+def read_part(path: str, layout: ExrLayout, buf, index: int, channels: list[str] | None = None,
               io: IoMode | None = None) -> DeepImage:
-    """Read deep part ``index`` of a file whose layout and bytes :func:`read_layout` returned (no re-read)."""
+    """Read deep part ``index`` of a file whose layout and source :func:`read_layout` returned (``buf`` may also
+    be the file's bytes). The part's sizes are checked against the file before either reader touches it."""
     mode = io or _io_mode
     header = layout.parts[index]
+    src = as_source(buf, path)
+    check_part_size(layout, index, src.size, path)
     oiio_io.validate(path, index, header)
     if mode != "oiio":
         try:
-            return fast.read_part(buf, layout, index, path, channels)
+            return fast.read_part(src, layout, index, path, channels)
         except fast.Unsupported as e:
             if mode == "fast":
                 raise RanadError(f"the fast reader does not handle this file ({e}); use --io auto", path) from None

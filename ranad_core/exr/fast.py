@@ -15,16 +15,19 @@ from __future__ import annotations
 
 import os
 import struct
+import zlib
 from concurrent.futures import ThreadPoolExecutor
+from typing import NamedTuple
 
 import numpy as np
 
 from ..deep import DeepImage
 from ..errors import RanadError
 from . import compression as codec
-from .header import (LINES_PER_CHUNK, VERSION_LONG_NAMES, VERSION_NONIMAGE, Attribute, ChannelInfo, ExrLayout,
-                     PartHeader, encode_box2i, encode_chlist, encode_int, encode_string, offsets_array,
-                     write_header, MAGIC, STRUCTURAL, COMPRESSION_NAMES)
+from .header import (LINES_PER_CHUNK, MAX_EXPANSION, VERSION_LONG_NAMES, VERSION_NONIMAGE, Attribute, ChannelInfo,
+                     ExrLayout, as_source, check_part_size, encode_box2i, encode_chlist, encode_int, encode_string,
+                     max_samples_per_pixel, offset_table_span, offsets_array, part_geometry, write_header, MAGIC,
+                     STRUCTURAL, COMPRESSION_NAMES)
 
 _DTYPES = {"half": np.dtype("<f2"), "float": np.dtype("<f4"), "uint": np.dtype("<u4")}
 READ_COMPRESSIONS = (codec.NONE, codec.RLE, codec.ZIPS, codec.ZIP)
@@ -42,26 +45,71 @@ def _threads() -> int:
     return max(1, min(8, os.cpu_count() or 1))
 
 
-def _chunk_geometry(part: PartHeader, tiled: bool):
-    """Yield (row0, row1, col0, col1) in data-window-relative pixels for each chunk, in offset-table order."""
-    xmin, ymin, xmax, ymax = part.data_window
-    w, h = xmax - xmin + 1, ymax - ymin + 1
-    if tiled:
-        xs, ys, level_mode, _ = part.tiles
-        if level_mode != 0:
-            raise Unsupported("multi-resolution deep tiles")
-        for ty in range((h + ys - 1) // ys):
-            for tx in range((w + xs - 1) // xs):
-                yield ty * ys, min(h, (ty + 1) * ys), tx * xs, min(w, (tx + 1) * xs)
+class _Chunk(NamedTuple):
+    """One chunk's place in the file, from its header (checked against the file before any payload is read)."""
+
+    start: int
+    table_pos: int
+    packed_table: int
+    data_pos: int
+    packed_data: int
+    unpacked_data: int
+
+
+def _inflate(data: bytes, expected: int) -> bytes:
+    """zlib-decode ``data`` to exactly ``expected`` bytes, never producing more (``max_length``)."""
+    d = zlib.decompressobj()
+    try:
+        raw = d.decompress(data, expected)
+        # the stream may hold exactly `expected` bytes and still need its end marker and checksum read
+        while not d.eof and d.unconsumed_tail:
+            if d.decompress(d.unconsumed_tail, 1):
+                raise codec.CodecError(f"zip block decodes to more than {expected} bytes")
+    except zlib.error as e:
+        raise codec.CodecError(f"zlib: {e}") from None
+    if len(raw) != expected:
+        raise codec.CodecError(f"zip block decodes to {len(raw)} bytes, expected {expected}")
+    if not d.eof:
+        raise codec.CodecError("zlib: incomplete or truncated stream")
+    return raw
+
+
+def unpack(comp: int, data: bytes, expected: int) -> bytes:
+    """Decode one packed block (sample-count table or sample data) into exactly ``expected`` bytes.
+
+    ``expected`` is checked against what ``data`` can possibly hold before anything is allocated: a block can
+    unpack to at most :data:`MAX_EXPANSION` times its size, so a claimed size beyond that is refused, and zlib
+    is told to stop at ``expected`` (a decompression bomb cannot produce more).
+    """
+    if expected == 0:
+        return b""
+    if comp == codec.NONE or len(data) == expected:
+        if len(data) != expected:
+            raise codec.CodecError(f"uncompressed block has {len(data)} bytes, expected {expected}")
+        return data
+    if expected > MAX_EXPANSION[comp] * len(data):
+        raise codec.CodecError(f"{len(data)} packed bytes cannot hold the {expected} bytes claimed")
+    if comp in (codec.ZIPS, codec.ZIP):
+        raw = np.frombuffer(_inflate(data, expected), dtype=np.uint8)
+    elif comp == codec.RLE:
+        raw = codec._rle_decode(data, expected)
     else:
-        lpc = LINES_PER_CHUNK[part.compression]
-        for y in range(0, h, lpc):
-            yield y, min(h, y + lpc), 0, w
+        raise codec.CodecError(f"compression {comp} is not handled by the fast codec")
+    return codec._unpredict_deinterleave(raw)
 
 
-def read_part(buf: bytes, layout: ExrLayout, index: int, path: str,
+def read_part(buf, layout: ExrLayout, index: int, path: str,
               channels: list[str] | None = None) -> DeepImage:
-    """Decode deep part ``index`` of a file held in memory as ``buf``."""
+    """Decode deep part ``index``; ``buf`` is a :class:`~.header.ByteSource` (read as needed) or the file's bytes.
+
+    Streamed in three steps so that memory follows the image, not the file's claims: (1) every chunk header,
+    checked against the file's length, the part's geometry, the compression's largest expansion and the other
+    chunks (no overlaps); (2) the sample-count tables, checked (never decreasing, at most
+    :func:`~.header.max_samples_per_pixel` per pixel, and matching each chunk's claimed data size) before the
+    output arrays are allocated; (3) each chunk's samples, decoded and scattered into the output, one chunk per
+    thread at a time.
+    """
+    src = as_source(buf, path)
     part = layout.parts[index]
     comp = part.compression
     if comp not in READ_COMPRESSIONS:
@@ -72,70 +120,101 @@ def read_part(buf: bytes, layout: ExrLayout, index: int, path: str,
             raise RanadError(f"channel {c.name!r} has an unknown pixel type", path)
         if c.xsampling != 1 or c.ysampling != 1:
             raise Unsupported("sub-sampled channels")
+    if not chans:
+        raise RanadError("corrupt header (empty channel list)", path)
     chans = sorted(chans, key=lambda c: c.name.encode())
     if channels is not None:
         missing = [n for n in channels if n not in {c.name for c in chans}]
         if missing:
             raise RanadError(f"missing channel(s) {', '.join(missing)}", path)
     tiled = layout.part_is_tiled(index)
-    geometry = list(_chunk_geometry(part, tiled))
+    geo = part_geometry(layout, index, path)
+    if geo.level_mode != 0:
+        raise Unsupported("multi-resolution deep tiles")
+    check_part_size(layout, index, src.size, path)
     xmin, ymin, xmax, ymax = part.data_window
-    width, height = xmax - xmin + 1, ymax - ymin + 1
-
-    # offset tables of all parts follow the headers back to back
-    pos = layout.header_end
-    for i in range(index):
-        pos += 8 * _chunk_count(layout, i)
-    n_chunks = _chunk_count(layout, index)
-    if n_chunks != len(geometry):
-        raise RanadError(f"corrupt header (chunkCount {n_chunks}, expected {len(geometry)})", path)
-    starts = offsets_array(buf, pos, n_chunks, path)
+    width, height = geo.width, geo.height
+    n_chunks = geo.n_chunks
+    table_pos, count, chunks_begin = offset_table_span(layout, index, path)
+    if count != n_chunks:
+        raise RanadError(f"corrupt header (chunkCount {count}, expected {n_chunks})", path)
+    starts = offsets_array(src, table_pos, n_chunks, path)
+    chunks_begin = chunks_begin or table_pos + 8 * n_chunks
     multipart = layout.multipart
     head_fmt = ("<i" if multipart else "<") + ("4i" if tiled else "i") + "QQQ"
     head_size = struct.calcsize(head_fmt)
+    ratio = MAX_EXPANSION[comp]
+    row_size = sum(c.size for c in chans)
 
-    def decode(k: int):
-        r0, r1, c0, c1 = geometry[k]
-        where = f"tile {k}" if tiled else f"scan line {ymin + r0}"
+    def where(k: int) -> str:
+        return f"tile {k}" if tiled else f"scan line {ymin + geo.chunk(k)[0]}"
+
+    # (1) chunk headers
+    heads: list[_Chunk] = []
+    total_table = total_data = 0
+    for k in range(n_chunks):
+        r0, r1, c0, c1 = geo.chunk(k)
         start = int(starts[k])
-        if start <= 0 or start + head_size > len(buf):
-            raise RanadError(f"truncated file ({where} is missing)", path)
-        fields = struct.unpack_from(head_fmt, buf, start)
+        if start <= 0 or start + head_size > src.size:  # past the end (or >= 2^63), or 0: never written
+            raise RanadError(f"truncated file ({where(k)} is missing)", path)
+        if start < chunks_begin:
+            raise RanadError(f"corrupt chunk offset table ({where(k)} points into the header)", path)
+        fields = struct.unpack(head_fmt, src.read(start, head_size, f"{where(k)}'s header"))
         if multipart:
             if fields[0] != index:
-                raise RanadError(f"corrupt chunk ({where} belongs to part {fields[0]})", path)
+                raise RanadError(f"corrupt chunk ({where(k)} belongs to part {fields[0]})", path)
             fields = fields[1:]
         if tiled:
             tx, ty, lx, ly = fields[:4]
-            xs, ys = part.tiles[:2]
-            if (tx * xs, ty * ys, lx, ly) != (c0, r0, 0, 0):
-                raise RanadError(f"corrupt chunk ({where} has coordinates {tx},{ty})", path)
+            if (tx * geo.chunk_w, ty * geo.chunk_h, lx, ly) != (c0, r0, 0, 0):
+                raise RanadError(f"corrupt chunk ({where(k)} has coordinates {tx},{ty})", path)
         elif fields[0] != ymin + r0:
-            raise RanadError(f"corrupt chunk ({where} says it starts at line {fields[0]})", path)
+            raise RanadError(f"corrupt chunk ({where(k)} says it starts at line {fields[0]})", path)
         packed_table, packed_data, unpacked_data = fields[-3:]
         p = start + head_size
-        if p + packed_table + packed_data > len(buf):
-            raise RanadError(f"truncated file ({where} is cut short)", path)
+        if p + packed_table + packed_data > src.size:
+            raise RanadError(f"truncated file ({where(k)} is cut short)", path)
+        table_bytes = (r1 - r0) * (c1 - c0) * 4
+        if table_bytes > ratio * packed_table or unpacked_data > ratio * packed_data:
+            raise RanadError(f"corrupt chunk ({where(k)}: its packed sizes {packed_table} and {packed_data} cannot "
+                             f"hold {table_bytes} and {unpacked_data} bytes)", path)
+        if unpacked_data % row_size:
+            raise RanadError(f"corrupt chunk ({where(k)}: {unpacked_data} bytes of samples is not a whole number "
+                             f"of {row_size}-byte samples)", path)
+        heads.append(_Chunk(start, p, packed_table, p + packed_table, packed_data, unpacked_data))
+        total_table += table_bytes
+        total_data += unpacked_data
+    spans = sorted((h.start, h.data_pos + h.packed_data, k) for k, h in enumerate(heads))
+    for (_, end, k), (nxt, _, j) in zip(spans, spans[1:]):
+        if nxt < end:
+            raise RanadError(f"corrupt chunk offset table ({where(k)} and {where(j)} overlap)", path)
+
+    # (2) sample-count tables: per-pixel counts, checked before the output is allocated
+    cap = max_samples_per_pixel()
+    counts_img = np.zeros((height, width), dtype=np.int32)
+    for k, h in enumerate(heads):
+        r0, r1, c0, c1 = geo.chunk(k)
         rows, cols = r1 - r0, c1 - c0
         try:
-            table = codec.decompress(comp, buf[p:p + packed_table], rows * cols * 4)
-            data = codec.decompress(comp, buf[p + packed_table:p + packed_table + packed_data], unpacked_data)
+            table = unpack(comp, src.read(h.table_pos, h.packed_table, f"{where(k)}'s sample counts"), rows * cols * 4)
         except codec.CodecError as e:
-            raise RanadError(f"corrupt chunk ({where}: {e})", path) from None
+            raise RanadError(f"corrupt chunk ({where(k)}: sample counts: {e})", path) from None
         cum = np.frombuffer(table, dtype="<i4").reshape(rows, cols).astype(np.int64)
         counts = np.diff(cum, axis=1, prepend=0)
         if np.any(counts < 0):
-            raise RanadError(f"corrupt chunk ({where}: sample counts decrease)", path)
-        return counts, data
-
-    with ThreadPoolExecutor(_threads()) as pool:
-        decoded = list(pool.map(decode, range(n_chunks)))
-
-    counts_img = np.zeros((height, width), dtype=np.int64)
-    for (r0, r1, c0, c1), (counts, _) in zip(geometry, decoded):
+            raise RanadError(f"corrupt chunk ({where(k)}: sample counts decrease)", path)
+        if counts.size and int(counts.max()) > cap:
+            y, x = np.unravel_index(int(np.argmax(counts)), counts.shape)
+            raise RanadError(f"{where(k)}: pixel ({xmin + c0 + x}, {ymin + r0 + y}) has {int(counts.max())} samples, "
+                             f"more than the limit of {cap} per pixel (set RANAD_MAX_SAMPLES_PER_PIXEL to raise it)",
+                             path)
+        if int(counts.sum(dtype=np.int64)) * row_size != h.unpacked_data:
+            raise RanadError(f"corrupt chunk ({where(k)}: {int(counts.sum(dtype=np.int64))} samples of {row_size} "
+                             f"bytes, but {h.unpacked_data} bytes of sample data)", path)
         counts_img[r0:r1, c0:c1] = counts
     offsets = np.zeros(width * height + 1, dtype=np.int64)
     np.cumsum(counts_img.ravel(), out=offsets[1:])
+    del counts_img
     n = int(offsets[-1])
 
     keep = [c for c in chans if channels is None or c.name in channels]
@@ -143,22 +222,23 @@ def read_part(buf: bytes, layout: ExrLayout, index: int, path: str,
     values = np.empty((n, len(value_names)), dtype=np.float32)
     ids = {c.name: np.empty(n, dtype=np.uint32) for c in keep if c.type == "uint"}
     runs = _channel_runs(chans, value_names)
-    row_size = sum(c.size for c in chans)
 
+    # (3) sample data, one chunk at a time per thread
     def scatter(k: int) -> None:
-        """Copy one chunk's rows into the ragged arrays: per row, one transposing copy per channel run."""
-        r0, r1, c0, c1 = geometry[k]
-        counts, data = decoded[k]
-        row_totals = counts.sum(axis=1)
-        if int(row_totals.sum()) * row_size != len(data):
-            raise RanadError(f"corrupt chunk (rows {ymin + r0}-{ymin + r1 - 1}: sample data size mismatch)", path)
+        """Decode one chunk and copy its rows into the ragged arrays: per row, one transposing copy per run."""
+        r0, r1, c0, c1 = geo.chunk(k)
+        h = heads[k]
+        try:
+            data = unpack(comp, src.read(h.data_pos, h.packed_data, f"{where(k)}'s samples"), h.unpacked_data)
+        except codec.CodecError as e:
+            raise RanadError(f"corrupt chunk ({where(k)}: {e})", path) from None
         p = 0
         for r in range(r0, r1):
-            m = int(row_totals[r - r0])
-            if m == 0:
-                continue
             # a row of a chunk (a full scan line, or a tile row) is contiguous in the ragged layout
             dst = int(offsets[r * width + c0])
+            m = int(offsets[r * width + c1]) - dst
+            if m == 0:
+                continue
             for dtype, size, names, col0 in runs:
                 block = np.frombuffer(data, dtype=dtype, count=m * len(names), offset=p).reshape(len(names), m)
                 if col0 is not None:
@@ -169,8 +249,9 @@ def read_part(buf: bytes, layout: ExrLayout, index: int, path: str,
                             ids[name][dst:dst + m] = block[j]
                 p += m * size * len(names)
 
-    with ThreadPoolExecutor(_threads()) as pool:
-        list(pool.map(scatter, range(n_chunks)))
+    if n:
+        with ThreadPoolExecutor(_threads()) as pool:
+            list(pool.map(scatter, [k for k, h in enumerate(heads) if h.unpacked_data]))
     return DeepImage(values=values, offsets=offsets, channels=value_names, ids=ids,
                      data_window=part.data_window, display_window=part.display_window,
                      channel_types={c.name: c.type for c in keep}, header=dict(part.attrs))
@@ -196,14 +277,6 @@ def _channel_runs(chans: list[ChannelInfo], value_names: list[str]):
                 continue
         runs.append((_DTYPES[c.type], c.size, [c.name], j))
     return runs
-
-
-def _chunk_count(layout: ExrLayout, i: int) -> int:
-    part = layout.parts[i]
-    cc = part.get("chunkCount")
-    if cc is not None:
-        return int(cc)
-    return sum(1 for _ in _chunk_geometry(part, layout.part_is_tiled(i)))
 
 
 # ---- writing -----------------------------------------------------------------------------------------

@@ -65,9 +65,13 @@ def describe(path: str | os.PathLike, stats: bool = True, overrides: dict | None
     """A JSON-ready description of every part of an EXR file (deep statistics for deep parts). `overrides`:
     a channels.mapping_options dict (--map, --preset), applied to what `ranad denoise` would read."""
     path = os.fspath(path)
-    layout, buf = read_layout(path)
-    out: dict[str, Any] = {"file": path, "file_size": os.path.getsize(path), "multipart": layout.multipart,
-                           "parts": []}
+    layout, src = read_layout(path)  # the headers only; chunks are read below when stats are asked for
+    with src:
+        return _describe(path, layout, src, stats)
+
+
+def _describe(path: str, layout, src, stats: bool) -> dict[str, Any]:
+    out: dict[str, Any] = {"file": path, "file_size": src.size, "multipart": layout.multipart, "parts": []}
     for i, part in enumerate(layout.parts):
         dw, disp = part.data_window, part.display_window
         deep = layout.part_is_deep(i)
@@ -103,7 +107,7 @@ def describe(path: str | os.PathLike, stats: bool = True, overrides: dict | None
             except RanadError as e:
                 info["denoise_channels"] = {"mode": f"cannot denoise: {e.problem}"}
         if deep and stats:
-            info.update(_deep_stats(read_part(path, layout, buf, i)))
+            info.update(_deep_stats(read_part(path, layout, src, i)))
         out["parts"].append(info)
     return out
 

@@ -12,7 +12,7 @@ import numpy as np
 
 from ..deep import DeepImage
 from ..errors import RanadError
-from .header import Attribute, PartHeader
+from .header import Attribute, PartHeader, max_samples_per_pixel
 
 _TYPES = {"half": "half", "float": "float", "uint": "uint"}
 
@@ -23,20 +23,42 @@ def _oiio():
     return oiio
 
 
+def _last_error(source=None) -> str:
+    """OpenImageIO's last error message as one line (its text may not even be valid UTF-8 on hostile files)."""
+    try:
+        text = (source.geterror() if source is not None else _oiio().geterror()) or ""
+    except Exception:  # noqa: BLE001 - e.g. UnicodeDecodeError from the binding
+        return "unreadable error message"
+    lines = [line.strip() for line in str(text).strip().splitlines() if line.strip()]
+    return lines[-1][:300] if lines else "unknown error"
+
+
+def _foreign(e: Exception, what: str, path: str) -> RanadError:
+    """A RanadError for an exception the OpenImageIO binding raised (RuntimeError, ValueError, ...)."""
+    first = (str(e).strip().splitlines() or [""])[0][:300]
+    return RanadError(f"{what} ({type(e).__name__}: {first})", path)
+
+
 def open_input(path: str):
     oiio = _oiio()
-    inp = oiio.ImageInput.open(path)
+    try:
+        inp = oiio.ImageInput.open(path)
+    except Exception as e:  # noqa: BLE001 - the binding's exceptions become one-line user errors
+        raise _foreign(e, "cannot be opened by OpenImageIO", path) from None
     if inp is None:
-        msg = oiio.geterror().strip().splitlines()
-        raise RanadError(f"cannot be opened by OpenImageIO ({msg[-1] if msg else 'unknown error'})", path)
+        raise RanadError(f"cannot be opened by OpenImageIO ({_last_error()})", path)
     return inp
 
 
 def _deep_part_spec(inp, path: str, part_index: int):
     """Seek ``inp`` to the part and return its spec, or say why it is not a deep part OpenImageIO reads."""
-    if not inp.seek_subimage(part_index, 0):
-        raise RanadError(f"OpenImageIO cannot find part {part_index}", path)
-    spec = inp.spec()
+    try:
+        found = inp.seek_subimage(part_index, 0)
+        spec = inp.spec() if found else None
+    except Exception as e:  # noqa: BLE001
+        raise _foreign(e, f"OpenImageIO cannot read part {part_index}", path) from None
+    if not found:
+        raise RanadError(f"OpenImageIO cannot find part {part_index} ({_last_error(inp)})", path)
     if not spec.deep:
         raise RanadError("not a deep image (flat EXR); ranad needs deep EXRs", path)
     return spec
@@ -51,25 +73,47 @@ def validate(path: str, part_index: int, part: PartHeader) -> None:
     inp = open_input(path)
     try:
         spec = _deep_part_spec(inp, path, part_index)
+        ours = {c.name: c.type for c in part.channels}
+        theirs = dict(zip(spec.channelnames, _formats(spec)))
+    except RanadError:
+        raise
+    except Exception as e:  # noqa: BLE001
+        raise _foreign(e, "OpenImageIO cannot read the header", path) from None
     finally:
         inp.close()
-    ours = {c.name: c.type for c in part.channels}
-    theirs = dict(zip(spec.channelnames, _formats(spec)))
     if set(ours) != set(theirs) or any(theirs[n] != _TYPES.get(t) for n, t in ours.items()):
         raise RanadError(f"channel list disagrees with OpenImageIO ({sorted(ours)} vs {sorted(theirs)})", path)
 
 
 def read_part(path: str, part_index: int, part: PartHeader, channels: list[str] | None = None) -> DeepImage:
-    """Read one deep part sample by sample through OpenImageIO (slow, always available)."""
+    """Read one deep part sample by sample through OpenImageIO (slow, always available).
+
+    The caller has checked the part's sizes against the file (:func:`~.header.check_part_size`); here every
+    failure of the binding becomes a RanadError, and the sample counts OpenImageIO reports are held to the same
+    per-pixel cap as the fast reader's before the output is allocated."""
+    try:
+        return _read_part(path, part_index, part, channels)
+    except RanadError:
+        raise
+    except MemoryError:
+        raise RanadError("OpenImageIO ran out of memory reading the deep data (corrupt sample counts?)",
+                         path) from None
+    except Exception as e:  # noqa: BLE001 - the binding's exceptions become one-line user errors
+        raise _foreign(e, "OpenImageIO could not read the deep data", path) from None
+
+
+def _read_part(path: str, part_index: int, part: PartHeader, channels: list[str] | None) -> DeepImage:
     inp = open_input(path)
     try:
         spec = _deep_part_spec(inp, path, part_index)
         dd = inp.read_native_deep_image(part_index, 0)
         if dd is None:
-            msg = inp.geterror().strip().splitlines()
-            raise RanadError(f"OpenImageIO could not read the deep data ({msg[-1] if msg else 'error'})", path)
+            raise RanadError(f"OpenImageIO could not read the deep data ({_last_error(inp)})", path)
     finally:
         inp.close()
+    x0, y0, x1, y1 = part.data_window
+    if (spec.x, spec.y, spec.width, spec.height) != (x0, y0, x1 - x0 + 1, y1 - y0 + 1):
+        raise RanadError("data window disagrees with OpenImageIO", path)
     names = list(spec.channelnames)
     formats = _formats(spec)
     order = sorted(range(len(names)), key=lambda i: names[i].encode())
@@ -80,6 +124,11 @@ def read_part(path: str, part_index: int, part: PartHeader, channels: list[str] 
         order = [i for i in order if names[i] in channels]
     npix = spec.width * spec.height
     counts = np.array([dd.samples(p) for p in range(npix)], dtype=np.int64)
+    cap = max_samples_per_pixel()
+    if npix and int(counts.max()) > cap:
+        p = int(np.argmax(counts))
+        raise RanadError(f"pixel ({x0 + p % spec.width}, {y0 + p // spec.width}) has {int(counts.max())} samples, "
+                         f"more than the limit of {cap} per pixel (set RANAD_MAX_SAMPLES_PER_PIXEL to raise it)", path)
     offsets = np.zeros(npix + 1, dtype=np.int64)
     np.cumsum(counts, out=offsets[1:])
     value_idx = [i for i in order if formats[i] != "uint"]
