@@ -67,10 +67,10 @@ def describe(path: str | os.PathLike, stats: bool = True, overrides: dict | None
     path = os.fspath(path)
     layout, src = read_layout(path)  # the headers only; chunks are read below when stats are asked for
     with src:
-        return _describe(path, layout, src, stats)
+        return _describe(path, layout, src, stats, overrides)
 
 
-def _describe(path: str, layout, src, stats: bool) -> dict[str, Any]:
+def _describe(path: str, layout, src, stats: bool, overrides: dict | None) -> dict[str, Any]:
     out: dict[str, Any] = {"file": path, "file_size": src.size, "multipart": layout.multipart, "parts": []}
     for i, part in enumerate(layout.parts):
         dw, disp = part.data_window, part.display_window
