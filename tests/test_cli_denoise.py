@@ -1,0 +1,218 @@
+"""`ranad denoise` options through the command line (click's CliRunner), each checked by what it must change:
+the README's shot with the shipped cross-frame default and --reference, --threads, --max-memory, --tile,
+--halo, --kind, --device and --map."""
+
+from __future__ import annotations
+
+import json
+import re
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+from click.testing import CliRunner
+
+from ranad_cli.main import cli
+from ranad_core import cache as cache_io
+from ranad_core import shot as shot_mod
+from ranad_core.exr import read_deep, write_deep
+from test_denoise import tiny_model
+
+SHOT = Path(__file__).resolve().parents[1] / "examples" / "synth_shot"
+FRAME = SHOT / "noisy_spp16.0001.exr"
+
+
+def run(*args):
+    return CliRunner().invoke(cli, [str(a) for a in args])
+
+
+@pytest.fixture(scope="module")
+def model_file(tmp_path_factory):
+    """A tiny untrained single-frame model (receptive field 13 px, halo 16) as a .safetensors file."""
+    from safetensors.torch import save_file
+
+    m = tiny_model()
+    path = tmp_path_factory.mktemp("model") / "tiny.safetensors"
+    save_file({k: v.contiguous() for k, v in m.state_dict().items()}, str(path),
+              metadata={"model_config": json.dumps(m.config.to_dict())})
+    return str(path)
+
+
+@pytest.fixture
+def keep_torch_threads():
+    n = torch.get_num_threads()
+    yield
+    torch.set_num_threads(n)
+
+
+def smape(ref, test, eps=1e-2):
+    """The README's figure, written out here: mean |test - ref| / (|test| + |ref| + eps)."""
+    ref, test = np.asarray(ref, np.float64), np.asarray(test, np.float64)
+    return float(np.mean(np.abs(test - ref) / (np.abs(test) + np.abs(ref) + eps)))
+
+
+def flat_rgb(img):
+    """The composited beauty (R, G, B over A, bins in depth order)."""
+    names = [c for c in ("R", "G", "B", "A", "Z", "ZBack") if c in img.channels]
+    b = img.with_values(img.values[:, [img.channels.index(c) for c in names]], names)
+    b.ids = {}
+    return b.flatten()[..., :3]
+
+
+def test_readme_shot_with_the_shipped_cross_frame_default_and_reference(tmp_path):
+    """The README's main job: a 3-frame shot without --model picks cpu-small-xf-v2, denoises each frame with its
+    neighbours, and --reference reports the centre frame's SMAPE before and after, which the written files
+    confirm (and which must improve)."""
+    out = tmp_path / "denoised" / "beauty.####.exr"
+    r = run("denoise", SHOT / "noisy_spp16.####.exr", "-o", out, "--reference", SHOT / "reference_spp16.####.exr",
+            "--cache", tmp_path / "cache")
+    assert r.exit_code == 0, r.output
+    assert re.search(r"model cpu-small-xf-v2@[0-9a-f]+;", r.output), r.output
+    assert "denoised 3 frame(s)" in r.output
+    written = sorted(p.name for p in (tmp_path / "denoised").iterdir())
+    assert written == ["beauty.0000.exr", "beauty.0001.exr", "beauty.0002.exr"]
+    # frame 1 was denoised with both neighbours (the model's 5-frame window, cut to the shot)
+    _, meta = cache_io.read_cache(cache_io.cache_path(str(tmp_path / "cache"),
+                                                      str(tmp_path / "denoised" / "beauty.0001.exr")))
+    assert [Path(p).name for p in json.loads(meta["window"])] == [f"noisy_spp16.000{f}.exr" for f in (0, 1, 2)]
+    # only frame 1 has a reference: one report line, whose numbers the files reproduce
+    reports = re.findall(r"(\S+): flattened SMAPE vs reference ([\d.]+) -> ([\d.]+)", r.output)
+    assert [name for name, _, _ in reports] == ["noisy_spp16.0001.exr"], r.output
+    before, after = float(reports[0][1]), float(reports[0][2])
+    noisy, ref = read_deep(FRAME), read_deep(SHOT / "reference_spp16.0001.exr")
+    den = read_deep(tmp_path / "denoised" / "beauty.0001.exr")
+    np.testing.assert_array_equal(den.offsets, noisy.offsets)
+    assert smape(flat_rgb(ref), flat_rgb(noisy)) == pytest.approx(before, abs=1e-4)
+    # the file is stored in half precision, the report was made before writing
+    assert smape(flat_rgb(ref), flat_rgb(den)) == pytest.approx(after, abs=2e-4)
+    assert after < 0.6 * before, (before, after)
+
+
+def test_threads_sets_torchs_threads_for_the_run(tmp_path, model_file, keep_torch_threads, monkeypatch):
+    seen = []
+    real = shot_mod.denoise_window
+
+    def spy(*a, **k):
+        seen.append(torch.get_num_threads())
+        return real(*a, **k)
+
+    monkeypatch.setattr(shot_mod, "denoise_window", spy)
+    for n in (1, 2):
+        r = run("denoise", FRAME, "-o", tmp_path / f"t{n}.exr", "--model", model_file, "--threads", n)
+        assert r.exit_code == 0, r.output
+    assert seen == [1, 2]
+    np.testing.assert_array_equal(read_deep(tmp_path / "t1.exr").values, read_deep(tmp_path / "t2.exr").values)
+    r = run("denoise", FRAME, "-o", tmp_path / "t0.exr", "--model", model_file, "--threads", 0)
+    assert r.exit_code == 2 and "--threads" in r.output and not (tmp_path / "t0.exr").exists()
+
+
+def test_max_memory_is_the_tile_budget(tmp_path, model_file, monkeypatch):
+    """--max-memory reaches the tile choice as bytes (less what the frame itself holds), and the tile chosen is
+    the one used (recorded in the cache)."""
+    calls = []
+    real = shot_mod.choose_tile
+
+    def spy(offsets, width, height, halo, budget, frames=1):
+        calls.append((budget, real(offsets, width, height, halo, budget, frames)))
+        return calls[-1][1]
+
+    monkeypatch.setattr(shot_mod, "choose_tile", spy)
+    held = shot_mod.frame_memory(read_deep(FRAME))
+    for text, size in (("3G", 3 * 2**30), ("1536MiB", 1536 * 2**20), ("2.5G", 2.5 * 2**30)):
+        r = run("denoise", FRAME, "-o", tmp_path / "m.exr", "--model", model_file, "--max-memory", text,
+                "--cache", tmp_path / "c")
+        assert r.exit_code == 0, r.output
+        assert calls[-1][0] == pytest.approx(size - held), text
+        _, meta = cache_io.read_cache(cache_io.cache_path(str(tmp_path / "c"), str(tmp_path / "m.exr")))
+        assert int(meta["tile"]) == calls[-1][1]
+    r = run("denoise", FRAME, "-o", tmp_path / "bad.exr", "--model", model_file, "--max-memory", "lots")
+    assert r.exit_code == 2 and "--max-memory" in r.output and not (tmp_path / "bad.exr").exists()
+
+
+def test_tile_and_halo(tmp_path, model_file):
+    """--tile 16 with the default halo (the receptive field) equals the whole frame; --halo 0 makes seams; both
+    are recorded in the cache; a tile under 16 is refused."""
+    whole = tmp_path / "whole.exr"
+    assert run("denoise", FRAME, "-o", whole, "--model", model_file).exit_code == 0
+    cases = {"tiled": ("--tile", 16), "tiled_halo16": ("--tile", 16, "--halo", 16),
+             "cut": ("--tile", 16, "--halo", 0)}
+    for name, opts in cases.items():
+        r = run("denoise", FRAME, "-o", tmp_path / f"{name}.exr", "--model", model_file, *opts,
+                "--cache", tmp_path / "c")
+        assert r.exit_code == 0, r.output
+        _, meta = cache_io.read_cache(cache_io.cache_path(str(tmp_path / "c"), str(tmp_path / f"{name}.exr")))
+        assert (meta["tile"], meta["halo"]) == ("16", "0" if name == "cut" else "16"), name
+    ref = read_deep(whole).values
+    for name in ("tiled", "tiled_halo16"):
+        np.testing.assert_allclose(read_deep(tmp_path / f"{name}.exr").values, ref, rtol=2e-3, atol=1e-3)
+    assert np.abs(read_deep(tmp_path / "cut.exr").values - ref).max() > 1e-2
+    r = run("denoise", FRAME, "-o", tmp_path / "small.exr", "--model", model_file, "--tile", 8)
+    assert r.exit_code == 2 and "--tile" in r.output and not (tmp_path / "small.exr").exists()
+    r = run("denoise", FRAME, "-o", tmp_path / "neg.exr", "--model", model_file, "--halo", -1)
+    assert r.exit_code == 2 and "--halo" in r.output
+
+
+def test_kind_names_the_input_kind(tmp_path, model_file):
+    """The example is deep-OID (one bin per object id per pixel): auto and --kind deepoid report it; the same
+    bins with one id for all of them are deep-Z, reported by auto and accepted by --kind deepz."""
+    for kind in ("auto", "deepoid"):
+        r = run("denoise", FRAME, "-o", tmp_path / f"{kind}.exr", "--model", model_file, "--kind", kind)
+        assert r.exit_code == 0 and "deep-OID input" in r.output, (kind, r.output)
+    img = read_deep(FRAME)
+    img.ids = {"id": np.zeros(img.num_bins, np.uint32)}
+    write_deep(tmp_path / "z.exr", img)
+    for kind in ("auto", "deepz"):
+        r = run("denoise", tmp_path / "z.exr", "-o", tmp_path / f"z_{kind}.exr", "--model", model_file,
+                "--kind", kind)
+        assert r.exit_code == 0 and "deep-Z input" in r.output, (kind, r.output)
+    r = run("denoise", FRAME, "-o", tmp_path / "x.exr", "--model", model_file, "--kind", "flat")
+    assert r.exit_code == 2 and "--kind" in r.output
+
+
+def test_device_cpu_runs_and_cuda_is_refused_cleanly_without_it(tmp_path, model_file, monkeypatch):
+    r = run("denoise", FRAME, "-o", tmp_path / "auto.exr", "--model", model_file)
+    assert r.exit_code == 0, r.output
+    r = run("denoise", FRAME, "-o", tmp_path / "cpu.exr", "--model", model_file, "--device", "cpu")
+    assert r.exit_code == 0, r.output
+    np.testing.assert_array_equal(read_deep(tmp_path / "cpu.exr").values, read_deep(tmp_path / "auto.exr").values)
+    monkeypatch.setattr(torch.cuda, "is_available", lambda: False)
+    r = run("denoise", FRAME, "-o", tmp_path / "gpu" / "cuda.exr", "--model", model_file, "--device", "cuda")
+    assert r.exit_code == 2, r.output
+    lines = r.output.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("ranad: error: ") and "cuda" in lines[0].lower()
+    assert "Traceback" not in r.output and not (tmp_path / "gpu" / "cuda.exr").exists()
+    r = run("denoise", FRAME, "-o", tmp_path / "tpu.exr", "--model", model_file, "--device", "tpu")
+    assert r.exit_code == 2 and "--device" in r.output
+
+
+def renamed_split(img, names=("kd", "ks")):
+    """`img` with its diffuse/specular layers renamed (a renderer's own AOV names)."""
+    rename = {f"{old}.{c}": f"{new}.{c}" for old, new in zip(("diffuse", "specular"), names) for c in "RGB"}
+    channels = [rename.get(c, c) for c in img.channels]
+    out = img.with_values(img.values.copy(), channels)
+    out.channel_types = {rename.get(c, c): t for c, t in img.channel_types.items()}
+    return out, rename
+
+
+def test_map_finds_renamed_layers(tmp_path, model_file):
+    """A frame whose diffuse/specular layers are called kd/ks, mapped with --map, denoises exactly like the
+    same frame with the standard names; unmapped, it runs without the split (and differs)."""
+    img = read_deep(FRAME)
+    ren, rename = renamed_split(img)
+    write_deep(tmp_path / "kd.exr", ren)
+    assert run("denoise", FRAME, "-o", tmp_path / "std.exr", "--model", model_file).exit_code == 0
+    r = run("denoise", tmp_path / "kd.exr", "-o", tmp_path / "mapped.exr", "--model", model_file,
+            "--map", "diffuse=kd", "--map", "specular=ks")
+    assert r.exit_code == 0, r.output
+    std, mapped = read_deep(tmp_path / "std.exr"), read_deep(tmp_path / "mapped.exr")
+    assert sorted(mapped.channels) == sorted(ren.channels)
+    for c in std.channels:
+        np.testing.assert_array_equal(mapped.channel(rename.get(c, c)), std.channel(c), err_msg=c)
+    r = run("denoise", tmp_path / "kd.exr", "-o", tmp_path / "unmapped.exr", "--model", model_file)
+    assert r.exit_code == 0, r.output
+    unmapped = read_deep(tmp_path / "unmapped.exr")
+    np.testing.assert_array_equal(unmapped.channel("kd.R"), ren.channel("kd.R"))   # not found, so not denoised
+    assert not np.array_equal(unmapped.channel("R"), mapped.channel("R"))
+    r = run("denoise", tmp_path / "kd.exr", "-o", tmp_path / "bad.exr", "--model", model_file, "--map", "diffuse")
+    assert r.exit_code == 2 and "--map" in r.output and not (tmp_path / "bad.exr").exists()
