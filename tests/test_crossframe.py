@@ -4,6 +4,7 @@ cross-frame model with one frame is the single-frame model it starts from."""
 from __future__ import annotations
 
 import json
+import re
 from pathlib import Path
 
 import numpy as np
@@ -205,6 +206,47 @@ def test_default_window_is_the_training_window(tmp_path):
     assert len(json.loads(m["window"])) == 1
 
 
+def _flat(img):
+    """Composited R, G, B (bins in depth order, 'over')."""
+    names = [c for c in ("R", "G", "B", "A", "Z", "ZBack") if c in img.channels]
+    b = img.with_values(img.values[:, [img.channels.index(c) for c in names]], names)
+    b.ids = {}
+    return b.flatten()[..., :3].astype(np.float64)
+
+
+def _tonemap(x):
+    x = np.maximum(x, 0)
+    return x / (1 + x)
+
+
+def _temporal_error(outs, refs):
+    """Mean over consecutive frames of mean |(T(o[t+1]) - T(o[t])) - (T(r[t+1]) - T(r[t]))|, T = x / (1 + x)."""
+    return float(np.mean([np.mean(np.abs((_tonemap(outs[t + 1]) - _tonemap(outs[t]))
+                                         - (_tonemap(refs[t + 1]) - _tonemap(refs[t]))))
+                          for t in range(len(outs) - 1)]))
+
+
+def test_reference_noise_floor_is_what_a_perfect_denoiser_scores():
+    """The floor `ranad eval --temporal` prints, estimated from the noisy input's temporal error, against a
+    simulation: a static scene, noisy frames at spp and references at ref_spp with independent noise of spread
+    1/sqrt(samples); a perfect denoiser (the true image) scores the references' own flicker."""
+    from ranad_core.evaluate import reference_noise_floor
+
+    rng = np.random.default_rng(0)
+    truth = rng.uniform(0.05, 0.3, (64, 64, 3))
+    rows = []
+    perfect = []
+    for spp, ref_spp in ((4, 64), (16, 1024), (64, 256)):
+        render = lambda n: truth + 0.05 * rng.standard_normal(truth.shape) / np.sqrt(n)  # noqa: E731
+        noisy, refs = [render(spp) for _ in range(5)], [render(ref_spp) for _ in range(5)]
+        rows.append({"spp": spp, "ref_spp": ref_spp, "method": "noisy", "temporal": _temporal_error(noisy, refs)})
+        perfect.append(_temporal_error([truth] * 5, refs))
+    floors = reference_noise_floor(rows)
+    assert list(floors) == [4, 16, 64]
+    for (spp, floor), want in zip(floors.items(), perfect):
+        assert floor == pytest.approx(want, rel=0.03), spp
+
+
 def test_temporal_eval_compares_single_and_cross_frame(tmp_path):
     """A shot whose frames 0 and 2 use the noisy frame itself as reference (plumbing; frame 1 has a real one)."""
     import shutil
@@ -238,10 +280,23 @@ def test_temporal_eval_compares_single_and_cross_frame(tmp_path):
 
     rows = {row["method"]: row for row in csv.DictReader(open(out / "temporal.csv"))}
     assert set(rows) == {"noisy", "oidn", "ranad", "ranad-xf"}
-    assert all(float(rows[k]["temporal"]) >= 0 for k in rows)
     assert float(rows["ranad-xf"]["seconds"]) > 0 and "| 16 | ranad-xf | 1 |" in r.output
-    floor = float(rows["noisy"]["temporal"]) * np.sqrt(16 / (16 + m["ref_spp"]))
-    assert f"{floor:.4f} at 16 spp" in r.output
+    # the temporal errors recomputed here: references n0, r1, n2 (n: noisy frames, r1: frame 1's reference);
+    # the noisy input's error then reduces to mean |T(n1) - T(r1)|
+    noisy = [read_deep(SHOT / f"noisy_spp16.{f:04d}.exr") for f in range(3)]
+    refs = [_flat(noisy[0]), _flat(read_deep(SHOT / "reference_spp16.0001.exr")), _flat(noisy[2])]
+    want_noisy = float(np.mean(np.abs(_tonemap(_flat(noisy[1])) - _tonemap(refs[1]))))
+    assert float(rows["noisy"]["temporal"]) == pytest.approx(want_noisy, rel=1e-4)
+    assert _temporal_error([_flat(n) for n in noisy], refs) == pytest.approx(want_noisy, rel=1e-6)
+    single_outs = [_flat(denoise_window(single, [n], 0).image) for n in noisy]
+    windows = [([0, 1], 0), ([0, 1, 2], 1), ([1, 2], 1)]            # up to 3 frames, shorter at the ends
+    cross_outs = [_flat(denoise_window(cross, [noisy[i] for i in w], c).image) for w, c in windows]
+    for method, outs in (("ranad", single_outs), ("ranad-xf", cross_outs)):
+        assert float(rows[method]["temporal"]) == pytest.approx(_temporal_error(outs, refs), rel=1e-4), method
+    from ranad_core.metrics import flip                               # FLIP: 0 on frames 0 and 2 (ref = input)
+    assert float(rows["noisy"]["flip"]) == pytest.approx(flip(refs[1], _flat(noisy[1])) / 3, rel=1e-4)
+    floor = float(re.search(r"([\d.]+) at 16 spp", r.output).group(1))
+    assert 0 < floor < want_noisy
     r = CliRunner().invoke(cli, ["eval", str(SHOT.parent), "-o", str(out), "--temporal", "--model", paths["single"],
                                  "--cross-model", paths["cross"]])
     assert r.exit_code == 2
