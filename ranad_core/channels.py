@@ -183,8 +183,8 @@ def layer_values(img: DeepImage, chans) -> np.ndarray | None:
 
 def split_layer(img: DeepImage, chans, total: np.ndarray) -> list:
     """[(channel triple, [N, 3] values)] writing `total` back into a layer entry: a plain layer gets `total`; a
-    sum's parts get it in the proportions of their noisy values (per bin and channel, equal shares where the
-    noisy parts cancel out), so the parts sum to `total`."""
+    sum's parts get it in the proportions of their noisy values (per bin and channel; where the noisy parts sum
+    to 0, in their proportions over the whole frame, or equal shares), so the parts sum to `total`."""
     parts = layer_parts(chans)
     if len(parts) == 1:
         return [(parts[0], total)]
@@ -192,7 +192,13 @@ def split_layer(img: DeepImage, chans, total: np.ndarray) -> list:
     s = sum(noisy)
     ok = np.abs(s) > 1e-12
     safe = np.where(ok, s, 1.0)
-    return [(p, (total * np.where(ok, v / safe, 1.0 / len(parts))).astype(np.float32)) for p, v in zip(parts, noisy)]
+    frame = sum(v.sum(0) for v in noisy)
+    frame_ok = np.abs(frame) > 1e-12
+    out = []
+    for p, v in zip(parts, noisy):
+        fallback = np.where(frame_ok, v.sum(0) / np.where(frame_ok, frame, 1.0), 1.0 / len(parts))
+        out.append((p, (total * np.where(ok, v / safe, fallback)).astype(np.float32)))
+    return out
 
 
 def _find_layer(channels, names, kind: str):
@@ -301,13 +307,12 @@ def detect_names(channels, overrides: dict | None = None, source: str | None = N
     m = ChannelMap(depth_back="ZBack" if "ZBack" in ch else None, coverage="coverage" if "coverage" in ch else None)
     preset = PRESETS.get(opts.get("preset")) if opts.get("preset") else None
     for layer, names in ALIASES.items():
-        found = None
-        for val in (preset.layers.get(layer, ()) if preset else ()):
-            found = _resolve(ch, layer, val, source)
-            if found:
-                break
         kind = "xyz" if layer == "normal" else "rgb"
-        m.layers[layer] = found or _find_layer(ch, names, kind)
+        if preset and layer in preset.layers:          # the renderer's names only (no generic alias)
+            m.layers[layer] = next((f for f in (_resolve(ch, layer, v, source) for v in preset.layers[layer]) if f),
+                                   None)
+        else:
+            m.layers[layer] = _find_layer(ch, names, kind)
     motion = {k: _find_layer(ch, (k,), "xy") for k in MOTION_LAYERS}
     conv = dict(opts.get("motion") or {})
     if preset:
