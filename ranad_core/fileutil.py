@@ -27,6 +27,13 @@ def check_writable_target(path: str | os.PathLike) -> str:
     return path
 
 
+def new_file_mode() -> int:
+    """The mode a file created now gets from the process umask (0o666 & ~umask), as open() would give it."""
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return 0o666 & ~mask
+
+
 @contextlib.contextmanager
 def atomic_output(path: str | os.PathLike, suffix: str | None = None) -> Iterator[str]:
     """Yield a temporary path next to ``path``; rename it onto ``path`` if the block succeeds.
@@ -45,7 +52,7 @@ def atomic_output(path: str | os.PathLike, suffix: str | None = None) -> Iterato
     os.close(fd)
     try:
         yield tmp
-        os.chmod(tmp, 0o644)
+        os.chmod(tmp, new_file_mode())       # mkstemp makes 0600 files: give the mode a plain open() would
         os.replace(tmp, path)
     except BaseException:
         with contextlib.suppress(OSError):

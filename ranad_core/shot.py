@@ -128,6 +128,14 @@ class FrameStore:
 KINDS = ("auto", "deepz", "deepoid")
 
 
+def output_compression(img) -> str:
+    """The compression an output gets: the input's where the deep writer has it (none, zips), else zips (ZIP and
+    RLE inputs: the same zlib or better)."""
+    attr = img.header.get("compression")
+    raw = getattr(attr, "raw", b"")
+    return "none" if raw[:1] == b"\x00" else "zips"
+
+
 def count_nonfinite(img) -> int:
     """Bins with a NaN/Inf value in any channel (what deep.replace_nonfinite replaces)."""
     import numpy as np
@@ -225,7 +233,7 @@ def denoise_shot(jobs, loaded, opts: ShotOptions, frame_bar=None, tile_bar=None,
                 raise RanadError(f"{nonfinite} bin(s) with NaN/Inf values", frame.path)
             summary.messages.append(msg + " (replaced in every channel: depth with the frame's largest finite "
                                           "depth, any other value with 0)")
-        write_deep(out, result.image)
+        write_deep(out, result.image, compression=output_compression(img))
         if opts.cache_dir:
             cache_io.write_cache(cache_io.cache_path(opts.cache_dir, out), img, result, loaded.model_id,
                                  opts.model_spec or "", frame.path, frame.frame, tile, halo,
