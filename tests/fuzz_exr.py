@@ -14,12 +14,13 @@ offsets pointing at other chunks), insertions and deletions. Case ``k`` of seed 
 Every case runs what the CLI runs on a file: ``describe(stats=False)`` (``ranad info --no-stats``),
 ``describe()`` (``ranad info``: OpenImageIO's check, then the fast reader or OpenImageIO), the fast reader alone
 (without OpenImageIO's check in front, so it sees everything), ``flatten`` of what was read (``ranad flatten``),
-and every ``--oiio-every``-th case ``read_deep(io="oiio")``. A case passes when each of these returns or raises
-``RanadError``, within ``--cpu-limit`` CPU seconds per target, with a tracemalloc peak (numpy arrays, bytes)
-under ``--mem-limit-mb``, in a worker whose address space is capped (RLIMIT_AS) so that an allocation outside
-tracemalloc's view fails instead of taking the machine. Failures are: ``foreign`` (any other exception),
-``slow``, ``memory`` (peak over the limit or MemoryError), ``hang`` (no answer in ``--hang-s`` wall seconds) and
-``crash`` (the worker died). Each is printed with its case number, so ``--case K --save F`` reproduces it.
+and for every ``--oiio-every``-th case of a file up to 128 KB ``read_deep(io="oiio")``. A case passes when each
+of these returns or raises ``RanadError``, within ``--cpu-limit`` CPU seconds per target, with a tracemalloc
+peak (numpy arrays, bytes) under ``--mem-limit-mb``, in a worker whose address space is capped (RLIMIT_AS) so
+that an allocation outside tracemalloc's view fails instead of taking the machine. Failures are: ``foreign``
+(any other exception), ``slow``, ``memory`` (peak over the limit or MemoryError), ``hang`` (no answer in
+``--hang-s`` wall seconds) and ``crash`` (the worker died). Each is printed with its case number, so
+``--case K --save F`` reproduces it.
 """
 
 from __future__ import annotations
@@ -46,6 +47,9 @@ for p in (HERE, ROOT):
         sys.path.insert(0, p)
 
 FAILURES = ("foreign", "slow", "memory", "hang", "crash")
+#: the OpenImageIO target reads only mutated files up to this size (its per-value Python loop takes ~16 s on the
+#: 600 KB OpenEXR test images, unmutated: slow by design, not a finding)
+OIIO_MAX_BYTES = 128 << 10
 
 
 # ---- corpus ------------------------------------------------------------------------------------------
@@ -592,7 +596,9 @@ def campaign(cases: int, seed: int, start: int = 0, cpu_limit: float = 5.0, mem_
             data, base, what = make_case(corpus, seed, case)
             with open(path, "wb") as f:
                 f.write(data)
-            kind, res = worker.run(path, oiio=oiio_every > 0 and case % oiio_every == 0, timeout=hang_s)
+            # OpenImageIO's Python path moves one value per call (~0.16 M/s): only files of the small ones
+            oiio = oiio_every > 0 and case % oiio_every == 0 and len(data) <= OIIO_MAX_BYTES
+            kind, res = worker.run(path, oiio=oiio, timeout=hang_s)
             done += 1
             if kind != "ok":
                 counts[kind] += 1

@@ -15,7 +15,8 @@ from ..deep import DeepImage
 from ..errors import RanadError
 from ..fileutil import atomic_output
 from . import fast, oiio_io
-from .header import ByteSource, ExrLayout, FileSource, as_source, check_part_size, deep_state_code, read_source_layout
+from .header import (ByteSource, ExrLayout, FileSource, as_source, check_part_size, deep_state_code,
+                     read_source_layout)
 
 IoMode = Literal["auto", "oiio", "fast"]
 _io_mode: IoMode = "auto"
