@@ -174,8 +174,8 @@ class _Candidates:
             return best
         qx, qy = np.floor(xy[:, 0] + 0.5).astype(np.int64), np.floor(xy[:, 1] + 0.5).astype(np.int64)
         ids = ids if self.ids is not None else None
-        rings = [[(0, 0)]] + [[(oy, ox) for oy in range(-r, r + 1) for ox in range(-r, r + 1) if max(abs(oy), abs(ox)) == r]
-                              for r in range(1, radius + 1)]
+        rings = [[(0, 0)]] + [[(oy, ox) for oy in range(-r, r + 1) for ox in range(-r, r + 1)
+                               if max(abs(oy), abs(ox)) == r] for r in range(1, radius + 1)]
         stages = [sum(rings[:2], [])] + rings[2:]           # the pixel and its 8 neighbours, then wider rings
         for stage, offsets in enumerate(stages):
             rows = np.arange(n) if stage == 0 else np.flatnonzero(best < 0)

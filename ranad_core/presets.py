@@ -57,7 +57,8 @@ PRESETS: dict = {p.name: p for p in (
         },
         motion={"motion_next": ("motionvector",)},
         motion_conversion={"units": "pixels", "y": "down"},
-        sources=("https://help.autodesk.com/view/ARNOL/ENU/?guid=arnold_user_guide_ac_output_aovs_ac_expression_aovs_html",
+        sources=("https://help.autodesk.com/view/ARNOL/ENU/"
+                 "?guid=arnold_user_guide_ac_output_aovs_ac_expression_aovs_html",
                  "https://help.autodesk.com/cloudhelp/ENU/AR-DevGuide/files/plugins/shaders/"
                  "arnold_dev_guide_shading_lighting_av_aovs_html.html"),
         note="motionvector (VECTOR2, 'screen space motion vector') read as forward pixels over the camera shutter; "

@@ -200,7 +200,8 @@ def denoise_shot(jobs, loaded, opts: ShotOptions, frame_bar=None, tile_bar=None,
             raise RanadError(f"data window {img.data_window} differs from {first[1]} of {first[0]} "
                              "(frames of a sequence must match)", frame.path)
         mapping = detect(img, opts.overrides, frame.path)
-        check_kind(img, opts.kind, frame.path)
+        if opts.kind != "auto":                     # guess_kind sorts every bin: only when it is checked
+            check_kind(img, opts.kind, frame.path)
         bad = count_nonfinite(img)                  # every channel, not only those the model reads
         if bad and opts.strict:
             raise RanadError(f"{bad} bin(s) with NaN/Inf values", frame.path)

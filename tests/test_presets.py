@@ -26,7 +26,8 @@ SHOT = Path(__file__).resolve().parents[1] / "examples" / "synth_shot"
 RENDERERS = {
     "renderman": dict(diffuse=["directDiffuse", "indirectDiffuse"], specular=["directSpecular", "indirectSpecular"],
                       emission="emissive", albedo="albedo", normal=("Nn", "xyz"),
-                      motion={"motion_next": ("motionFore", "xy", 1.0, 1.0), "motion_prev": ("motionBack", "xy", 1.0, 1.0)}),
+                      motion={"motion_next": ("motionFore", "xy", 1.0, 1.0),
+                              "motion_prev": ("motionBack", "xy", 1.0, 1.0)}),
     "arnold": dict(diffuse=["diffuse_direct", "diffuse_indirect"], specular=["specular_direct", "specular_indirect"],
                    emission="emission", albedo="denoise_albedo", normal=("N", "XYZ"),
                    motion={"motion_next": ("motionvector", "XY", 1.0, 1.0)}),
