@@ -239,6 +239,15 @@ def test_huge_data_window_is_refused_before_listing_chunks(small, tmp_path):
     refused(lambda: read_deep(bad), "too large", seconds=5, max_mib=8)
 
 
+def test_window_larger_than_its_tables_allocates_nothing(tmp_path):
+    """12000x12000 pixels in a 1 MB file: each chunk's packed table is just big enough to claim its 48000 bytes
+    (at zlib's 1032:1) but holds garbage; nothing of the image's size (576 MB of counts) may be allocated first."""
+    garbage = bytes(range(47))
+    path = deep_file(tmp_path / "wide.exr", 12000, 12000, [(garbage, b"", 0)] * 12000, comp=2)
+    assert os.path.getsize(path) < 2 * MiB
+    refused(lambda: read_deep(path, io="fast"), "scan line 0: sample counts: zlib", seconds=10, max_mib=8)
+
+
 def test_chunk_count_without_attribute_is_counted_not_listed(tmp_path):
     rows = [[1, 0, 2]] * 3
     path = plain_file(tmp_path / "p.exr", rows)

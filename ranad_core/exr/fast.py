@@ -189,9 +189,10 @@ def read_part(buf, layout: ExrLayout, index: int, path: str,
         if nxt < end:
             raise RanadError(f"corrupt chunk offset table ({where(k)} and {where(j)} overlap)", path)
 
-    # (2) sample-count tables: per-pixel counts, checked before the output is allocated
+    # (2) sample-count tables: per-pixel counts, each table decoded and checked before anything of the image's
+    # size is allocated (a header can claim a window its tables do not hold)
     cap = max_samples_per_pixel()
-    counts_img = np.zeros((height, width), dtype=np.int32)
+    chunk_counts = []
     for k, h in enumerate(heads):
         r0, r1, c0, c1 = geo.chunk(k)
         rows, cols = r1 - r0, c1 - c0
@@ -211,7 +212,12 @@ def read_part(buf, layout: ExrLayout, index: int, path: str,
         if int(counts.sum(dtype=np.int64)) * row_size != h.unpacked_data:
             raise RanadError(f"corrupt chunk ({where(k)}: {int(counts.sum(dtype=np.int64))} samples of {row_size} "
                              f"bytes, but {h.unpacked_data} bytes of sample data)", path)
-        counts_img[r0:r1, c0:c1] = counts
+        chunk_counts.append(counts.astype(np.int32))
+    counts_img = np.empty((height, width), dtype=np.int32)
+    for k in range(n_chunks):
+        r0, r1, c0, c1 = geo.chunk(k)
+        counts_img[r0:r1, c0:c1] = chunk_counts[k]
+        chunk_counts[k] = None
     offsets = np.zeros(width * height + 1, dtype=np.int64)
     np.cumsum(counts_img.ravel(), out=offsets[1:])
     del counts_img
