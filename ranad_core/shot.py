@@ -129,11 +129,11 @@ KINDS = ("auto", "deepz", "deepoid")
 
 
 def output_compression(img) -> str:
-    """The compression an output gets: the input's where the deep writer has it (none, zips), else zips (ZIP and
-    RLE inputs: the same zlib or better)."""
-    attr = img.header.get("compression")
-    raw = getattr(attr, "raw", b"")
-    return "none" if raw[:1] == b"\x00" else "zips"
+    """The compression an output gets: the input's where OpenEXR allows it for deep data (none, rle, zips),
+    else zips (exr.fast.layout_of; write_deep keeps it, with the tiles and line order, by default)."""
+    from .exr.fast import layout_of
+
+    return layout_of(img.header).compression
 
 
 def count_nonfinite(img) -> int:
@@ -234,7 +234,7 @@ def denoise_shot(jobs, loaded, opts: ShotOptions, frame_bar=None, tile_bar=None,
                 raise RanadError(f"{nonfinite} bin(s) with NaN/Inf values", frame.path)
             summary.messages.append(msg + " (replaced in every channel: depth with the frame's largest finite "
                                           "depth, any other value with 0)")
-        write_deep(out, result.image, compression=output_compression(img))
+        write_deep(out, result.image)
         if opts.cache_dir:
             cache_io.write_cache(cache_io.cache_path(opts.cache_dir, out), img, result, loaded.model_id,
                                  opts.model_spec or "", frame.path, frame.frame, tile, halo,

@@ -1,4 +1,5 @@
-"""Output files (issue 25): created with the umask's mode, and an uncompressed input stays uncompressed."""
+"""Output files (issue 25): created with the umask's mode; the input's compression (none, RLE, ZIPS), tiling, line
+order and attributes are kept, and the untouched channels come back bit-exact."""
 
 from __future__ import annotations
 
@@ -6,9 +7,11 @@ import os
 import stat
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from ranad_core.exr import read_deep, read_header, write_deep
+from ranad_core.exr.header import Attribute
 from ranad_core.fileutil import atomic_output, new_file_mode
 from ranad_core.shot import output_compression
 from test_defects import tiny  # noqa: F401  (the fixture)
@@ -50,3 +53,41 @@ def test_denoise_keeps_an_uncompressed_input_uncompressed(tmp_path, tiny):
         assert r.exit_code == 0, r.output
     assert read_header(tmp_path / "a.exr").parts[0].compression == 0          # none stays none
     assert read_header(tmp_path / "b.exr").parts[0].compression == 2          # zips stays zips
+
+
+@pytest.mark.parametrize("compression,tiles,line_order", [
+    ("rle", None, 0), ("rle", None, 1), ("zips", (16, 8), 0), ("none", (8, 16), 2), ("rle", (16, 16), 1),
+    ("zips", None, 1)])
+def test_denoise_keeps_compression_tiling_line_order_and_attributes(tmp_path, tiny, compression, tiles, line_order):
+    from click.testing import CliRunner
+
+    from ranad_cli.main import cli
+
+    img = read_deep(SHOT / "noisy_spp16.0001.exr")
+    img.header["studio:shot"] = Attribute("string", b"sq010_sh020")
+    img.header["owner"] = Attribute("string", "Weta Digital".encode())
+    img.header["screenWindowWidth"] = Attribute("float", np.float32(1.5).tobytes())
+    src = tmp_path / "in.exr"
+    write_deep(src, img, compression=compression, tiles=tiles, line_order=line_order)
+    part = read_header(src).parts[0]
+    assert part.compression == {"none": 0, "rle": 1, "zips": 2}[compression]
+    assert (part.tiles[:2] if tiles else None) == tiles and part.get("lineOrder") == line_order
+    read_deep(src, io="oiio")                     # OpenEXR itself reads what the input writer made
+    out = tmp_path / "out.exr"
+    r = CliRunner().invoke(cli, ["denoise", str(src), "-o", str(out), "--model", tiny])
+    assert r.exit_code == 0, r.output
+    got = read_header(out).parts[0]
+    assert got.compression == part.compression and got.type == part.type
+    assert got.tiles == part.tiles and got.get("lineOrder") == line_order
+    same = {k for k in part.attrs if k not in ("deepImageState", "maxSamplesPerPixel")}
+    assert same <= set(got.attrs) and all(got.attrs[k] == part.attrs[k] for k in same), \
+        [k for k in same if got.attrs.get(k) != part.attrs[k]]
+    a, b = read_deep(src), read_deep(out, io="oiio")   # OpenEXR decodes the output
+    np.testing.assert_array_equal(a.offsets, b.offsets)
+    for name in a.ids:
+        np.testing.assert_array_equal(a.ids[name], b.ids[name])
+    untouched = [c for c in a.channels if c.split(".")[0] in ("albedo", "N", "emission", "motion_prev", "motion_next")]
+    assert untouched
+    for c in untouched:
+        assert np.array_equal(a.channel(c).view(np.uint32), b.channel(c).view(np.uint32)), c
+    assert not np.array_equal(a.channel("R"), b.channel("R"))

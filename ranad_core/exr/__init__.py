@@ -21,7 +21,7 @@ from .header import (ByteSource, ExrLayout, FileSource, as_source, check_part_si
 IoMode = Literal["auto", "oiio", "fast"]
 _io_mode: IoMode = "auto"
 
-__all__ = ["read_deep", "read_part", "write_deep", "read_layout", "set_io_mode", "get_io_mode", "DeepImage", "ExrLayout"]
+__all__ = ["read_deep", "read_part", "write_deep", "write_parts", "read_layout", "set_io_mode", "get_io_mode", "DeepImage", "ExrLayout"]
 
 
 def set_io_mode(mode: IoMode) -> None:
@@ -103,24 +103,74 @@ def read_part(path: str, layout: ExrLayout, buf, index: int, channels: list[str]
     return oiio_io.read_part(path, index, header, channels)
 
 
-def write_deep(path: str | os.PathLike, image: DeepImage, compression: str = "zips", io: IoMode | None = None,
-               state: str | None = None) -> None:
-    """Write ``image`` as a single-part deep scan-line EXR, atomically (temporary file, then rename).
+def write_deep(path: str | os.PathLike, image: DeepImage, compression: str | None = None, io: IoMode | None = None,
+               state: str | None = None, tiles: tuple[int, int] | None | str = "keep",
+               line_order: int | None = None) -> None:
+    """Write ``image`` as a single-part deep EXR, atomically (temporary file, then rename).
 
-    ``compression``: "zips" (default) or "none" on the fast path. ``state``: the deepImageState to record
+    By default the part is stored as the header it was read with says (:func:`fast.layout_of`): its
+    compression where OpenEXR allows it for deep data (none, rle, zips; anything else becomes zips), its tiles
+    (a one-level deep tiled part) and its line order; an image without such a header gets ZIPS scan lines.
+    ``compression`` ("none", "rle", "zips"), ``tiles`` ((width, height), or None for scan lines) and
+    ``line_order`` (0 increasing, 1 decreasing, 2 random y) override it. ``state``: the deepImageState to record
     ("messy", "sorted", "non_overlapping", "tidy"); by default it is measured from the bins when the input had
     the attribute, and left out otherwise.
     """
     path = os.fspath(path)
     mode = io or _io_mode
-    if compression not in fast.WRITE_COMPRESSIONS and mode != "oiio":
-        raise RanadError(f"cannot write deep compression {compression!r} (use zips or none)", path)
-    if state is None and "deepImageState" in image.header:
-        state = image.measured_state()
-    code = None if state is None else deep_state_code(state)
+    if compression is not None and compression not in fast.WRITE_COMPRESSIONS and mode != "oiio":
+        raise RanadError(f"cannot write deep compression {compression!r} (use {', '.join(fast.WRITE_COMPRESSIONS)})",
+                         path)
+    layout = _part_layout(image, compression, tiles, line_order)
+    code = _state_code(image, state)
     with atomic_output(path) as tmp:
         if mode == "oiio":
-            oiio_io.write(tmp, image, compression)
+            oiio_io.write(tmp, image, layout.compression)
         else:
             with open(tmp, "wb") as f:
-                fast.write_part(f, image, compression, code)
+                fast.write_part(f, image, layout.compression, code, layout.tiles, layout.line_order)
+
+
+def _part_layout(image: DeepImage, compression, tiles, line_order) -> fast.PartLayout:
+    keep = fast.layout_of(image.header, compression)
+    return fast.PartLayout(keep.compression, keep.tiles if tiles == "keep" else tiles,
+                           keep.line_order if line_order is None else line_order)
+
+
+def _state_code(image: DeepImage, state: str | None) -> int | None:
+    if state is None and "deepImageState" in image.header:
+        state = image.measured_state()
+    return None if state is None else deep_state_code(state)
+
+
+def write_parts(path: str | os.PathLike, source: str | os.PathLike, replaced: dict[int, DeepImage],
+                io: IoMode | None = None) -> None:
+    """Write a copy of the EXR file ``source`` to ``path`` (atomically) in which each deep part ``i`` of
+    ``replaced`` holds that image instead, stored as the source part was (compression, tiles, line order and
+    attributes, :func:`write_deep`'s defaults), and every other part is copied byte for byte (its header
+    attributes and its chunks). A single-part source gives a single-part file."""
+    path, source = os.fspath(path), os.fspath(source)
+    mode = io or _io_mode
+    layout, src = read_layout(source)
+    with src:
+        for i in replaced:
+            if not 0 <= i < len(layout.parts) or not layout.part_is_deep(i):
+                raise RanadError(f"part {i} is not a deep part of the file", source)
+        if not layout.multipart:
+            if set(replaced) != {0}:
+                raise RanadError("a single-part file has only part 0", source)
+            write_deep(path, replaced[0], io=mode)
+            return
+        if mode == "oiio":
+            raise RanadError("multi-part outputs are written by ranad's own writer; use --io auto", path)
+        parts = []
+        for i in range(len(layout.parts)):
+            if i in replaced:
+                img = replaced[i]
+                parts.append(fast.encode_part(img, _part_layout(img, None, "keep", None), _state_code(img, None), i))
+            else:
+                parts.append(fast.raw_part(src, layout, i, source))
+    deep = any(layout.part_is_deep(i) for i in range(len(layout.parts)))
+    with atomic_output(path) as tmp:
+        with open(tmp, "wb") as f:
+            fast.write_file(f, parts, multipart=True, deep=deep)

@@ -94,4 +94,46 @@ def compress(code: int, raw: bytes) -> bytes:
     if code in (ZIPS, ZIP):
         packed = zlib.compress(_interleave_predict(raw), ZLIB_LEVEL)
         return packed if len(packed) < len(raw) else raw
+    if code == RLE:
+        packed = _rle_encode(np.frombuffer(_interleave_predict(raw), dtype=np.uint8))
+        return packed if len(packed) < len(raw) else raw
     raise CodecError(f"compression {code} cannot be written by the fast codec")
+
+
+RLE_MAX_RUN = 127  # bytes per run (OpenEXR's MAX_RUN_LENGTH); a repeat needs at least 3 equal bytes
+
+
+def _rle_encode(raw: np.ndarray) -> bytes:
+    """OpenEXR RLE, vectorised: runs of 3 or more equal bytes become (count - 1, byte), everything between
+    them literal runs (-count, bytes...), each run at most RLE_MAX_RUN bytes (OpenEXR's rleUncompress reads
+    it)."""
+    n = raw.size
+    if n == 0:
+        return b""
+    starts = np.r_[0, np.flatnonzero(raw[1:] != raw[:-1]) + 1]
+    lengths = np.diff(np.r_[starts, n])
+    rep = lengths >= 3
+    # segments: each repeated run alone, consecutive short runs merged into one literal segment
+    new = np.ones(starts.size, bool)
+    new[1:] = rep[1:] | rep[:-1]
+    seg = np.cumsum(new) - 1
+    seg_start = starts[new]
+    seg_len = np.bincount(seg, weights=lengths).astype(np.int64)
+    seg_rep = rep[new]
+    # pieces of at most RLE_MAX_RUN bytes
+    npieces = -(-seg_len // RLE_MAX_RUN)
+    first = np.repeat(np.cumsum(npieces) - npieces, npieces)
+    k = np.arange(int(npieces.sum())) - first
+    owner = np.repeat(np.arange(seg_len.size), npieces)
+    pstart = seg_start[owner] + k * RLE_MAX_RUN
+    plen = np.minimum(RLE_MAX_RUN, seg_len[owner] - k * RLE_MAX_RUN)
+    prep = seg_rep[owner]
+    size = 1 + np.where(prep, 1, plen)
+    pos = np.cumsum(size) - size
+    out = np.empty(int(size.sum()), np.uint8)
+    out[pos] = np.where(prep, plen - 1, 256 - plen).astype(np.uint8)
+    out[pos[prep] + 1] = raw[pstart[prep]]
+    ls, ll, lp = pstart[~prep], plen[~prep], pos[~prep] + 1
+    within = np.arange(int(ll.sum())) - np.repeat(np.cumsum(ll) - ll, ll)
+    out[np.repeat(lp, ll) + within] = raw[np.repeat(ls, ll) + within]
+    return out.tobytes()

@@ -27,13 +27,13 @@ from . import compression as codec
 from .header import (LINES_PER_CHUNK, MAX_EXPANSION, VERSION_LONG_NAMES, VERSION_NONIMAGE, Attribute, ChannelInfo,
                      ExrLayout, as_source, check_part_size, encode_box2i, encode_chlist, encode_int, encode_string,
                      max_samples_per_pixel, offset_table_span, offsets_array, part_geometry, write_header, MAGIC,
-                     STRUCTURAL, COMPRESSION_NAMES)
+                     STRUCTURAL, COMPRESSION_NAMES, VERSION_MULTIPART, PartGeometry)
 
 _DTYPES = {"half": np.dtype("<f2"), "float": np.dtype("<f4"), "uint": np.dtype("<u4")}
 READ_COMPRESSIONS = (codec.NONE, codec.RLE, codec.ZIPS, codec.ZIP)
-WRITE_COMPRESSIONS = {"none": codec.NONE, "zips": codec.ZIPS}
-#: ZIP (16 lines per chunk) is valid EXR and read here, but OpenEXR 3.5 refuses it for deep parts, so only
-#: tests write it (to exercise multi-line chunks); users get none/zips.
+WRITE_COMPRESSIONS = {"none": codec.NONE, "rle": codec.RLE, "zips": codec.ZIPS}
+#: ZIP (16 lines per chunk) is valid EXR and read here, but OpenEXR 3.5 refuses it for deep parts ("Invalid
+#: compression for deep data"), so only tests write it (to exercise multi-line chunks); users get none/rle/zips.
 _ALL_WRITE_COMPRESSIONS = dict(WRITE_COMPRESSIONS, zip=codec.ZIP)
 
 
@@ -286,7 +286,50 @@ def _channel_runs(chans: list[ChannelInfo], value_names: list[str]):
 
 
 # ---- writing -----------------------------------------------------------------------------------------
-def build_header(image: DeepImage, comp: int, state: int | None) -> dict[str, Attribute]:
+#: line orders (the lineOrder attribute's byte): the order chunks are stored in, not their offset-table order
+INCREASING_Y, DECREASING_Y, RANDOM_Y = 0, 1, 2
+
+
+class PartLayout(NamedTuple):
+    """How a deep part is stored: its compression (a WRITE_COMPRESSIONS name), tile size (None: scan lines;
+    one resolution level) and line order (the order its chunks are stored in)."""
+
+    compression: str = "zips"
+    tiles: tuple[int, int] | None = None
+    line_order: int = INCREASING_Y
+
+
+def layout_of(header: dict, compression: str | None = None) -> PartLayout:
+    """The layout a part with the attributes ``header`` is written with: its compression where OpenEXR allows
+    it for deep data (none, rle, zips; OpenEXR refuses ZIP for deep parts, any other code becomes zips), its
+    tiling (a one-level deep tiled part keeps its tile size) and its line order (random y only for tiles).
+    ``compression`` overrides the header's."""
+    def get(name):
+        a = header.get(name)
+        return None if a is None else a.value()
+
+    if compression is None:
+        code = get("compression")
+        compression = next((n for n, c in WRITE_COMPRESSIONS.items() if c == code), "zips")
+    tiles = None
+    desc = get("tiles")
+    if str(get("type") or "").endswith("tile") and isinstance(desc, tuple) and desc[2] == 0:
+        tiles = (int(desc[0]), int(desc[1]))
+    order = get("lineOrder")
+    order = order if order in (INCREASING_Y, DECREASING_Y, RANDOM_Y) else INCREASING_Y
+    if order == RANDOM_Y and tiles is None:
+        order = INCREASING_Y
+    return PartLayout(compression, tiles, order)
+
+
+def _geometry(image: DeepImage, comp: int, tiles) -> PartGeometry:
+    if tiles is not None:
+        return PartGeometry(image.width, image.height, True, int(tiles[0]), int(tiles[1]))
+    return PartGeometry(image.width, image.height, False, image.width, LINES_PER_CHUNK[comp])
+
+
+def build_header(image: DeepImage, comp: int, state: int | None, tiles=None, line_order: int = INCREASING_Y,
+                 n_chunks: int | None = None) -> dict[str, Attribute]:
     """The input's attributes (passed through) plus the structural ones regenerated for what we write."""
     attrs = {k: v for k, v in image.header.items() if k not in STRUCTURAL and k != "lineOrder"}
     chans = [ChannelInfo(n, image.channel_types.get(n, "float")) for n in image.channels]
@@ -295,13 +338,17 @@ def build_header(image: DeepImage, comp: int, state: int | None) -> dict[str, At
     attrs["compression"] = Attribute("compression", bytes([comp]))
     attrs["dataWindow"] = encode_box2i(image.data_window)
     attrs["displayWindow"] = encode_box2i(image.display_window)
-    attrs["lineOrder"] = Attribute("lineOrder", bytes([0]))
+    attrs["lineOrder"] = Attribute("lineOrder", bytes([line_order]))
     attrs.setdefault("pixelAspectRatio", Attribute("float", struct.pack("<f", 1.0)))
     attrs.setdefault("screenWindowCenter", Attribute("v2f", struct.pack("<2f", 0.0, 0.0)))
     attrs.setdefault("screenWindowWidth", Attribute("float", struct.pack("<f", 1.0)))
-    attrs["type"] = encode_string("deepscanline")
+    attrs["type"] = encode_string("deeptile" if tiles is not None else "deepscanline")
+    if tiles is not None:
+        attrs["tiles"] = Attribute("tiledesc", struct.pack("<IIB", int(tiles[0]), int(tiles[1]), 0))
     attrs["version"] = encode_int(1)
-    attrs["chunkCount"] = encode_int(-(-image.height // LINES_PER_CHUNK[comp]))
+    if n_chunks is None:
+        n_chunks = _geometry(image, comp, tiles).n_chunks
+    attrs["chunkCount"] = encode_int(n_chunks)
     if "name" in image.header:
         attrs["name"] = image.header["name"]
     if state is not None:
@@ -309,53 +356,138 @@ def build_header(image: DeepImage, comp: int, state: int | None) -> dict[str, At
     return dict(sorted(attrs.items()))
 
 
-def write_part(f, image: DeepImage, compression: str = "zips", state: int | None = None) -> None:
-    """Write ``image`` as a single-part deep scan-line file to the open binary file ``f``."""
-    if compression not in _ALL_WRITE_COMPRESSIONS:
-        raise Unsupported(f"writing compression {compression}")
-    comp = _ALL_WRITE_COMPRESSIONS[compression]
-    attrs = build_header(image, comp, state)
-    long_names = any(len(k) > 31 or len(a.type) > 31 for k, a in attrs.items())
-    long_names |= any(len(n) > 31 for n in list(image.channels) + list(image.ids))
-    flags = VERSION_NONIMAGE | (VERSION_LONG_NAMES if long_names else 0)
-    head = struct.pack("<ii", MAGIC, 2 | flags) + write_header(attrs)
+class EncodedPart(NamedTuple):
+    """One part ready to be written: its attributes, its chunks (offset-table order, each with its chunk
+    header) and the order they are stored in."""
+
+    attrs: dict
+    chunks: list
+    order: list
+
+
+def _store_order(geo: PartGeometry, line_order: int) -> list[int]:
+    n = geo.n_chunks
+    if line_order != DECREASING_Y:
+        return list(range(n))
+    rows = [list(range(r * geo.chunks_x, (r + 1) * geo.chunks_x)) for r in range(geo.chunks_y)]
+    return [k for row in reversed(rows) for k in row]
+
+
+def encode_part(image: DeepImage, layout: PartLayout = PartLayout(), state: int | None = None,
+                part_number: int | None = None) -> EncodedPart:
+    """Encode ``image`` as a deep part (scan lines or one-level tiles); ``part_number``: its index in a
+    multi-part file (each chunk then starts with it), None for a single-part file."""
+    if layout.compression not in _ALL_WRITE_COMPRESSIONS:
+        raise Unsupported(f"writing compression {layout.compression}")
+    comp = _ALL_WRITE_COMPRESSIONS[layout.compression]
+    tiles = layout.tiles
+    if tiles is not None and (int(tiles[0]) < 1 or int(tiles[1]) < 1):
+        raise ValueError(f"tile size {tiles}")
+    geo = _geometry(image, comp, tiles)
+    attrs = build_header(image, comp, state, tiles, layout.line_order, geo.n_chunks)
 
     # channels in name order, grouped into runs that one transposing copy per row turns into file bytes
     names = sorted(list(image.channels) + list(image.ids), key=str.encode)
     infos = [ChannelInfo(n, "uint" if n in image.ids else image.channel_types.get(n, "float")) for n in names]
     runs = _channel_runs(infos, list(image.channels))
-    w, h = image.width, image.height
-    counts = image.counts.reshape(h, w)
-    cum_rows = np.cumsum(counts, axis=1).astype("<i4")
-    row_start = image.offsets[:-1:w] if w > 0 else np.zeros(h, np.int64)
-    row_end = image.offsets[w::w]
+    w = image.width
+    counts = image.counts.reshape(image.height, w)
+    offsets = image.offsets
+    prefix = b"" if part_number is None else struct.pack("<i", part_number)
+    x0, y0 = image.data_window[:2]
 
-    lpc = LINES_PER_CHUNK[comp]
-
-    def encode(y0: int) -> bytes:
-        y1 = min(h, y0 + lpc)
+    def encode(k: int) -> bytes:
+        r0, r1, c0, c1 = geo.chunk(k)
         rows = []
-        for y in range(y0, y1):
-            s0, s1 = int(row_start[y]), int(row_end[y])
+        for y in range(r0, r1):
+            s0, s1 = int(offsets[y * w + c0]), int(offsets[y * w + c1])
             for dtype, _, run_names, col0 in runs:
                 if col0 is not None:
-                    block = image.values[s0:s1, col0:col0 + len(run_names)].T.astype(dtype)
-                    rows.append(block.tobytes())
+                    rows.append(image.values[s0:s1, col0:col0 + len(run_names)].T.astype(dtype).tobytes())
                 else:
                     rows.extend(image.ids[n][s0:s1].astype(dtype).tobytes() for n in run_names)
         data = b"".join(rows)
-        table = cum_rows[y0:y1].tobytes()
+        table = np.cumsum(counts[r0:r1, c0:c1], axis=1).astype("<i4").tobytes()
         pt, pd = codec.compress(comp, table), codec.compress(comp, data)
-        return struct.pack("<iQQQ", image.data_window[1] + y0, len(pt), len(pd), len(data)) + pt + pd
+        if geo.tiled:
+            head = struct.pack("<4iQQQ", c0 // geo.chunk_w, r0 // geo.chunk_h, 0, 0, len(pt), len(pd), len(data))
+        else:
+            head = struct.pack("<iQQQ", y0 + r0, len(pt), len(pd), len(data))
+        return prefix + head + pt + pd
 
     with ThreadPoolExecutor(_threads()) as pool:
-        chunks = list(pool.map(encode, range(0, h, lpc)))
-    pos = len(head) + 8 * len(chunks)
-    table = np.empty(len(chunks), dtype="<u8")
-    for k, c in enumerate(chunks):
-        table[k] = pos
-        pos += len(c)
+        chunks = list(pool.map(encode, range(geo.n_chunks)))
+    return EncodedPart(attrs, chunks, _store_order(geo, layout.line_order))
+
+
+def _long_names(attrs: dict) -> bool:
+    if any(len(k) > 31 or len(a.type) > 31 for k, a in attrs.items()):
+        return True
+    chans = attrs.get("channels")
+    return chans is not None and any(len(c.name) > 31 for c in (chans.value() or []) if hasattr(c, "name"))
+
+
+def write_file(f, parts: list[EncodedPart], multipart: bool, deep: bool = True) -> None:
+    """Write encoded parts to the open binary file ``f``: magic and version flags, the headers, the offset
+    tables, then each part's chunks in its storage order. ``deep``: some part is deep (the non-image flag)."""
+    if not multipart and len(parts) != 1:
+        raise ValueError("a single-part file holds one part")
+    long_names = any(_long_names(p.attrs) for p in parts)
+    flags = (VERSION_NONIMAGE if deep else 0) | (VERSION_LONG_NAMES if long_names else 0)
+    flags |= VERSION_MULTIPART if multipart else 0
+    head = struct.pack("<ii", MAGIC, 2 | flags) + b"".join(write_header(p.attrs) for p in parts)
+    if multipart:
+        head += b"\0"
+    pos = len(head) + 8 * sum(len(p.chunks) for p in parts)
+    tables = []
+    for p in parts:
+        table = np.zeros(len(p.chunks), dtype="<u8")
+        for k in p.order:
+            table[k] = pos
+            pos += len(p.chunks[k])
+        tables.append(table.tobytes())
     f.write(head)
-    f.write(table.tobytes())
-    for c in chunks:
-        f.write(c)
+    for t in tables:
+        f.write(t)
+    for p in parts:
+        for k in p.order:
+            f.write(p.chunks[k])
+
+
+def raw_part(src, layout: ExrLayout, index: int, path: str, part_number: int | None = -1) -> EncodedPart:
+    """Part ``index`` of a file exactly as stored (attributes and every chunk's bytes, in the order the file
+    stores them), to be written into another file unchanged. Each chunk's extent comes from its own header
+    (deep: the packed table and data sizes; flat: the data size), checked against the file. ``part_number``:
+    the part's index in the file it goes to (None: a single-part file; -1: as in the source), which each
+    chunk's first field says in multi-part files."""
+    src = as_source(src, path)
+    part = layout.parts[index]
+    table_pos, count, _ = offset_table_span(layout, index, path)
+    if count is None:
+        raise RanadError(f"cannot copy part {index} (its chunk count is unknown)", path)
+    starts = offsets_array(src, table_pos, count, path)
+    deep, tiled = layout.part_is_deep(index), layout.part_is_tiled(index)
+    fmt = ("<i" if layout.multipart else "<") + ("4i" if tiled else "i") + ("QQQ" if deep else "i")
+    size = struct.calcsize(fmt)
+    chunks = []
+    for k, start in enumerate(starts.tolist()):
+        if start <= 0 or start + size > src.size:
+            raise RanadError(f"truncated file (part {index}, chunk {k} is missing)", path)
+        fields = struct.unpack(fmt, src.read(start, size, f"part {index}, chunk {k}'s header"))
+        body = fields[-3] + fields[-2] if deep else fields[-1]
+        if body < 0 or start + size + body > src.size:
+            raise RanadError(f"truncated file (part {index}, chunk {k} is cut short)", path)
+        chunks.append(src.read(start, size + body, f"part {index}, chunk {k}"))
+    if part_number != -1 and part_number != (index if layout.multipart else None):
+        skip = 4 if layout.multipart else 0
+        prefix = b"" if part_number is None else struct.pack("<i", part_number)
+        chunks = [prefix + c[skip:] for c in chunks]
+    order = sorted(range(count), key=lambda k: int(starts[k]))
+    return EncodedPart(dict(part.attrs), chunks, order)
+
+
+def write_part(f, image: DeepImage, compression: str = "zips", state: int | None = None, tiles=None,
+               line_order: int = INCREASING_Y) -> None:
+    """Write ``image`` as a single-part deep file (scan lines, or tiles of size ``tiles``) to the open binary
+    file ``f``."""
+    write_file(f, [encode_part(image, PartLayout(compression, tiles, line_order), state)], multipart=False)
