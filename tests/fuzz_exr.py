@@ -253,7 +253,7 @@ class FileMap:
 
     def regions(self):
         """Named byte ranges for bit flips."""
-        r = {"header": (8, self.header_end), "table": (self.header_end, self.table_end)}
+        r = {"header": (0, self.header_end), "table": (self.header_end, self.table_end)}
         if self.chunks:
             r["chunk"] = (self.table_end, len(self.data))
         return r
@@ -340,7 +340,11 @@ def _m_extreme(rng, buf, fm):
 def _m_struct(rng, buf, fm):
     """Targeted edits of fields that steer allocation and loops."""
     by_name = {a[0]: a for a in fm.attrs}
-    r = rng.randrange(9)
+    r = rng.randrange(10)
+    if r == 9:  # the version word's flags: tiled, long names, non-image (deep), multi-part
+        flip = rng.choice([0x200, 0x400, 0x800, 0x1000, 0x1800, 0x1200, 0xFF000, 1])
+        struct.pack_into("<i", buf, 4, struct.unpack_from("<i", buf, 4)[0] ^ flip)
+        return f"version^{flip:#x}"
     if r == 0 and "dataWindow" in by_name:
         _, _, _, vp, _ = by_name["dataWindow"]
         i = rng.randrange(4)
