@@ -607,6 +607,8 @@ def campaign(cases: int, seed: int, start: int = 0, cpu_limit: float = 5.0, mem_
             if kind != "ok":
                 counts[kind] += 1
                 failures.append({"case": case, "base": base, "mutation": what, "status": kind, "detail": res})
+                if log:
+                    print(json.dumps(failures[-1]), file=log, flush=True)
                 worker.close()
                 worker = Worker(mem_limit_mb, as_limit_mb, nice)
                 continue

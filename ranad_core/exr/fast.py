@@ -45,17 +45,6 @@ def _threads() -> int:
     return max(1, min(8, os.cpu_count() or 1))
 
 
-class _Chunk(NamedTuple):
-    """One chunk's place in the file, from its header (checked against the file before any payload is read)."""
-
-    start: int
-    table_pos: int
-    packed_table: int
-    data_pos: int
-    packed_data: int
-    unpacked_data: int
-
-
 def _inflate(data: bytes, expected: int) -> bytes:
     """zlib-decode ``data`` to exactly ``expected`` bytes, never producing more (``max_length``)."""
     d = zlib.decompressobj()
@@ -149,17 +138,21 @@ def read_part(buf, layout: ExrLayout, index: int, path: str,
     def where(k: int) -> str:
         return f"tile {k}" if tiled else f"scan line {ymin + geo.chunk(k)[0]}"
 
-    # (1) chunk headers
-    heads: list[_Chunk] = []
-    total_table = total_data = 0
+    # (1) chunk headers: first what the offsets alone show (each chunk needs at least its header's bytes, and
+    # chunks do not share bytes), then each header, checked before its sizes are used
+    ordered = np.sort(starts)
+    if n_chunks and (ordered[0] <= 0 or ordered[-1] + head_size > src.size):
+        k = int(np.flatnonzero((starts <= 0) | (starts + head_size > src.size))[0])
+        raise RanadError(f"truncated file ({where(k)} is missing)", path)  # past the end, >= 2^63, or 0
+    if n_chunks and ordered[0] < chunks_begin:
+        raise RanadError(f"corrupt chunk offset table ({where(int(np.argmin(starts)))} points into the header)", path)
+    if n_chunks > 1 and np.any(np.diff(ordered) < head_size):
+        raise RanadError("corrupt chunk offset table (chunks overlap)", path)
+    heads = np.empty((n_chunks, 4), dtype=np.int64)  # start of the table, packed table, packed data, unpacked data
     for k in range(n_chunks):
         r0, r1, c0, c1 = geo.chunk(k)
         start = int(starts[k])
-        if start <= 0 or start + head_size > src.size:  # past the end (or >= 2^63), or 0: never written
-            raise RanadError(f"truncated file ({where(k)} is missing)", path)
-        if start < chunks_begin:
-            raise RanadError(f"corrupt chunk offset table ({where(k)} points into the header)", path)
-        fields = struct.unpack(head_fmt, src.read(start, head_size, f"{where(k)}'s header"))
+        fields = struct.unpack(head_fmt, src.read(start, head_size, "a chunk header"))
         if multipart:
             if fields[0] != index:
                 raise RanadError(f"corrupt chunk ({where(k)} belongs to part {fields[0]})", path)
@@ -181,10 +174,8 @@ def read_part(buf, layout: ExrLayout, index: int, path: str,
         if unpacked_data % row_size:
             raise RanadError(f"corrupt chunk ({where(k)}: {unpacked_data} bytes of samples is not a whole number "
                              f"of {row_size}-byte samples)", path)
-        heads.append(_Chunk(start, p, packed_table, p + packed_table, packed_data, unpacked_data))
-        total_table += table_bytes
-        total_data += unpacked_data
-    spans = sorted((h.start, h.data_pos + h.packed_data, k) for k, h in enumerate(heads))
+        heads[k] = (p, packed_table, packed_data, unpacked_data)
+    spans = sorted(zip(starts.tolist(), (heads[:, 0] + heads[:, 1] + heads[:, 2]).tolist(), range(n_chunks)))
     for (_, end, k), (nxt, _, j) in zip(spans, spans[1:]):
         if nxt < end:
             raise RanadError(f"corrupt chunk offset table ({where(k)} and {where(j)} overlap)", path)
@@ -193,11 +184,12 @@ def read_part(buf, layout: ExrLayout, index: int, path: str,
     # size is allocated (a header can claim a window its tables do not hold)
     cap = max_samples_per_pixel()
     chunk_counts = []
-    for k, h in enumerate(heads):
+    for k in range(n_chunks):
         r0, r1, c0, c1 = geo.chunk(k)
         rows, cols = r1 - r0, c1 - c0
+        table_pos, packed_table, _, unpacked_data = (int(v) for v in heads[k])
         try:
-            table = unpack(comp, src.read(h.table_pos, h.packed_table, f"{where(k)}'s sample counts"), rows * cols * 4)
+            table = unpack(comp, src.read(table_pos, packed_table, f"{where(k)}'s sample counts"), rows * cols * 4)
         except codec.CodecError as e:
             raise RanadError(f"corrupt chunk ({where(k)}: sample counts: {e})", path) from None
         cum = np.frombuffer(table, dtype="<i4").reshape(rows, cols).astype(np.int64)
@@ -209,9 +201,9 @@ def read_part(buf, layout: ExrLayout, index: int, path: str,
             raise RanadError(f"{where(k)}: pixel ({xmin + c0 + x}, {ymin + r0 + y}) has {int(counts.max())} samples, "
                              f"more than the limit of {cap} per pixel (set RANAD_MAX_SAMPLES_PER_PIXEL to raise it)",
                              path)
-        if int(counts.sum(dtype=np.int64)) * row_size != h.unpacked_data:
+        if int(counts.sum(dtype=np.int64)) * row_size != unpacked_data:
             raise RanadError(f"corrupt chunk ({where(k)}: {int(counts.sum(dtype=np.int64))} samples of {row_size} "
-                             f"bytes, but {h.unpacked_data} bytes of sample data)", path)
+                             f"bytes, but {unpacked_data} bytes of sample data)", path)
         chunk_counts.append(counts.astype(np.int32))
     counts_img = np.empty((height, width), dtype=np.int32)
     for k in range(n_chunks):
@@ -233,9 +225,9 @@ def read_part(buf, layout: ExrLayout, index: int, path: str,
     def scatter(k: int) -> None:
         """Decode one chunk and copy its rows into the ragged arrays: per row, one transposing copy per run."""
         r0, r1, c0, c1 = geo.chunk(k)
-        h = heads[k]
+        table_pos, packed_table, packed_data, unpacked_data = (int(v) for v in heads[k])
         try:
-            data = unpack(comp, src.read(h.data_pos, h.packed_data, f"{where(k)}'s samples"), h.unpacked_data)
+            data = unpack(comp, src.read(table_pos + packed_table, packed_data, f"{where(k)}'s samples"), unpacked_data)
         except codec.CodecError as e:
             raise RanadError(f"corrupt chunk ({where(k)}: {e})", path) from None
         p = 0
@@ -257,7 +249,7 @@ def read_part(buf, layout: ExrLayout, index: int, path: str,
 
     if n:
         with ThreadPoolExecutor(_threads()) as pool:
-            list(pool.map(scatter, [k for k, h in enumerate(heads) if h.unpacked_data]))
+            list(pool.map(scatter, np.flatnonzero(heads[:, 3]).tolist()))
     return DeepImage(values=values, offsets=offsets, channels=value_names, ids=ids,
                      data_window=part.data_window, display_window=part.display_window,
                      channel_types={c.name: c.type for c in keep}, header=dict(part.attrs))
