@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 import re
+import shutil
 from pathlib import Path
 
 import numpy as np
@@ -153,9 +154,10 @@ def test_tile_and_halo(tmp_path, model_file):
     assert r.exit_code == 2 and "--halo" in r.output
 
 
-def test_kind_names_the_input_kind(tmp_path, model_file):
+def test_kind_names_and_checks_the_input_kind(tmp_path, model_file):
     """The example is deep-OID (one bin per object id per pixel): auto and --kind deepoid report it; the same
-    bins with one id for all of them are deep-Z, reported by auto and accepted by --kind deepz."""
+    bins with one id for all of them are deep-Z, reported by auto and accepted by --kind deepz. A frame of the
+    other kind than --kind asks for is refused in one line naming it, on any frame of a shot."""
     for kind in ("auto", "deepoid"):
         r = run("denoise", FRAME, "-o", tmp_path / f"{kind}.exr", "--model", model_file, "--kind", kind)
         assert r.exit_code == 0 and "deep-OID input" in r.output, (kind, r.output)
@@ -166,6 +168,19 @@ def test_kind_names_the_input_kind(tmp_path, model_file):
         r = run("denoise", tmp_path / "z.exr", "-o", tmp_path / f"z_{kind}.exr", "--model", model_file,
                 "--kind", kind)
         assert r.exit_code == 0 and "deep-Z input" in r.output, (kind, r.output)
+    for path, kind in ((FRAME, "deepz"), (tmp_path / "z.exr", "deepoid")):
+        out = tmp_path / f"refused_{kind}.exr"
+        r = run("denoise", path, "-o", out, "--model", model_file, "--kind", kind)
+        assert r.exit_code == 2 and r.output.count("\n") == 1, r.output
+        assert r.output.startswith(f"ranad: error: {path}: --kind {kind}") and not out.exists()
+    shot = tmp_path / "shot"
+    shot.mkdir()
+    shutil.copy(FRAME, shot / "b.0001.exr")
+    shutil.copy(tmp_path / "z.exr", shot / "b.0002.exr")                  # the second frame is deep-Z
+    r = run("denoise", shot / "b.####.exr", "-o", tmp_path / "o" / "b.####.exr", "--model", model_file,
+            "--kind", "deepoid")
+    assert r.exit_code == 2 and f"ranad: error: {shot / 'b.0002.exr'}: --kind deepoid" in r.output, r.output
+    assert not (tmp_path / "o" / "b.0002.exr").exists()
     r = run("denoise", FRAME, "-o", tmp_path / "x.exr", "--model", model_file, "--kind", "flat")
     assert r.exit_code == 2 and "--kind" in r.output
 
