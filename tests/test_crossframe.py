@@ -291,8 +291,11 @@ def test_temporal_eval_compares_single_and_cross_frame(tmp_path):
     single_outs = [_flat(denoise_window(single, [n], 0).image) for n in noisy]
     windows = [([0, 1], 0), ([0, 1, 2], 1), ([1, 2], 1)]            # up to 3 frames, shorter at the ends
     cross_outs = [_flat(denoise_window(cross, [noisy[i] for i in w], c).image) for w, c in windows]
-    for method, outs in (("ranad", single_outs), ("ranad-xf", cross_outs)):
-        assert float(rows[method]["temporal"]) == pytest.approx(_temporal_error(outs, refs), rel=1e-4), method
+    for method, outs in (("ranad", single_outs), ("ranad-xf", cross_outs)):   # the CSV keeps 6 digits
+        assert float(rows[method]["temporal"]) == pytest.approx(_temporal_error(outs, refs), rel=1e-5), method
+    # (the untrained cross-frame model barely uses its neighbours: one-frame windows, i.e. the single-frame
+    # model, would be off by more than 10x this tolerance)
+    assert abs(_temporal_error(cross_outs, refs) / _temporal_error(single_outs, refs) - 1) > 1e-4
     from ranad_core.metrics import flip                               # FLIP: 0 on frames 0 and 2 (ref = input)
     assert float(rows["noisy"]["flip"]) == pytest.approx(flip(refs[1], _flat(noisy[1])) / 3, rel=1e-4)
     floor = float(re.search(r"([\d.]+) at 16 spp", r.output).group(1))
