@@ -82,11 +82,12 @@ def aov_cmd(cache, pattern, output, aov_input):
             cache_io.check_cache(meta, path, loaded.model_id)
             window = json.loads(meta["window"])
             centre = int(meta["centre"])
-            beauty = [read_deep(p) for p in window]
+            part = meta.get("part") or None          # the part of a multi-part file the cache was made from
+            beauty = [read_deep(p, part=part) for p in window]
             cache_io.check_cache(meta, path, None, beauty[centre])
             aov_files = [source_of(meta, None if frame is None else frame - centre + k, p)
                          for k, p in enumerate(window)]
-            aov_imgs = [read_deep(p) if p != b else b_img for p, b, b_img in zip(aov_files, window, beauty)]
+            aov_imgs = [read_deep(p, part=part) if p != b else b_img for p, b, b_img in zip(aov_files, window, beauty)]
             layers = aov_layers(aov_imgs[centre].channels, pattern)
             if not layers:
                 raise RanadError(f"no AOV layers match {pattern!r} (layers with .R/.G/.B channels)", src)

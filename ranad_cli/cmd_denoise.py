@@ -74,9 +74,12 @@ def parse_bytes(text: str) -> float:
                    "beauty's kernels (see `ranad aov`).")
 @click.option("--reference", default=None, metavar="PATTERN",
               help="Reference frames (same layout) to report how much closer to them the output got.")
+@click.option("--part", "parts", multiple=True, metavar="NAME|INDEX",
+              help="Denoise this deep part of multi-part (e.g. stereo) files; repeatable. Default: every deep part "
+                   "with R, G, B, A, Z. The other parts are copied to the output byte for byte.")
 def denoise_cmd(inputs, output, frames, model, device, threads, kind, maps, preset, motion_units, fps, shutter,
                 motion_y, keep_noisy, tile, halo, max_memory, cache_dir, skip_existing, shard, strict, window, aovs,
-                reference):
+                reference, parts):
     """Denoise deep EXR INPUTS (files or patterns such as beauty.####.exr) into deep EXRs with the same pixels,
     bins, bin order, channels, ids and header: diffuse, specular, alpha and depth are denoised and the beauty
     is rebuilt from them.
@@ -88,12 +91,12 @@ def denoise_cmd(inputs, output, frames, model, device, threads, kind, maps, pres
     """
     import torch
 
-    from ranad_core.channels import detect, mapping_options
+    from ranad_core.channels import mapping_options
     from ranad_core.exr import read_deep
     from ranad_core.exr.sequence import expand_inputs, format_frame, is_pattern, output_path, shard as take_shard
     from ranad_core.fileutil import check_writable_target
     from ranad_core.model.store import load_model, training_window
-    from ranad_core.shot import ShotOptions, check_kind, denoise_shot, prescan
+    from ranad_core.shot import ShotOptions, denoise_shot, first_frame, prescan
 
     budget = parse_bytes(max_memory)
     if device == "cuda":  # auto runs on the CPU until the CUDA kernels land (issue 9)
@@ -118,22 +121,22 @@ def denoise_cmd(inputs, output, frames, model, device, threads, kind, maps, pres
             os.makedirs(cache_dir, exist_ok=True)
         except OSError as e:
             raise RanadError(f"cannot create the cache folder ({e.strerror or e})", cache_dir) from None
-    prescan(frames_list)
+    opts = ShotOptions(model_spec=model, overrides=overrides, tile=tile, halo=halo, max_memory=budget,
+                       keep_noisy=keep_noisy, cache_dir=cache_dir, skip_existing=skip_existing, strict=strict,
+                       aovs=aovs, kind=kind, parts=tuple(parts))
+    prescan(frames_list, opts)
     if model is None:  # the cross-frame model whenever frames have neighbours
         from ranad_core.model.store import default_model
 
         numbers = {f.frame for f in sequence if f.frame is not None}
         model = default_model(any(n + 1 in numbers for n in numbers) and window != 1)
     loaded = load_model(model)
-    first = read_deep(frames_list[0].path)
-    mapping = detect(first, overrides, frames_list[0].path)
-    found = check_kind(first, kind, frames_list[0].path)
+    opts.model_spec, opts.window = model, window or training_window(loaded)
+    _, mapping, found, labels = first_frame(frames_list[0].path, opts)
     click.echo(f"model {loaded.model_id}; {'deep-OID' if found == 'deepoid' else 'deep-Z'} input"
                f"{'' if kind == 'auto' else ' (--kind ' + kind + ', checked on every frame)'}; "
-               f"channels: {mapping.mode()}; motion: {mapping.motion.describe()}", err=True)
-    opts = ShotOptions(model_spec=model, overrides=overrides, tile=tile, halo=halo, max_memory=budget,
-                       keep_noisy=keep_noisy, cache_dir=cache_dir, skip_existing=skip_existing, strict=strict,
-                       window=window or training_window(loaded), aovs=aovs, kind=kind)
+               + (f"parts: {', '.join(labels)} (the others copied); " if labels else "")
+               + f"channels: {mapping.mode()}; motion: {mapping.motion.describe()}", err=True)
     scores = []
 
     def on_frame(job, img, result):

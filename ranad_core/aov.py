@@ -87,16 +87,17 @@ def _values(img: DeepImage, m: ChannelMap, layers: dict, perm: np.ndarray) -> di
 
 
 def denoise_aovs(model, images: list, centre: int, mapping: ChannelMap, layers: dict, embeddings: list,
-                 perms: list, offsets: list) -> dict:
+                 perms: list, offsets: list, flows: list | None = None) -> dict:
     """Denoised AOV layers of frame `centre`: layer -> [N, 3] in the file's bin order.
 
     images: the window's frames holding the beauty channels the mapping names and the AOV channels, not yet
-    motion-compensated; embeddings/perms/offsets: per window frame, as the primary pass made them (the cache)."""
+    motion-compensated; embeddings/perms/offsets: per window frame, as the primary pass made them (the cache);
+    flows: the per-pixel flows the primary pass used, if any."""
     from .denoise import is_cross_frame
     from .motion import compensate
 
     cross = is_cross_frame(model)
-    moved, _ = compensate(images, centre, motion=mapping.motion) if len(images) > 1 else (images, 0)
+    moved, _ = compensate(images, centre, flows, mapping.motion) if len(images) > 1 else (images, 0)
     h, w = images[centre].height, images[centre].width
     vals, window = [], []
     for k, img in enumerate(moved):

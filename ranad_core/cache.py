@@ -12,7 +12,8 @@ to rerun on other values:
   (what --model resolved to), `input` (absolute path of the denoised file), `window` (JSON list of the
   window's input paths), `centre` (index of the denoised frame in it), `frame`, `layout_sha` (fingerprint
   of the centre's bin layout and depths: SHA-256 of offsets and Z), `mapping` (JSON of the channel map),
-  `overrides` (JSON of the --map overrides, so `ranad aov` maps the channels the same way), `tile`, `halo`.
+  `overrides` (JSON of the --map overrides, so `ranad aov` maps the channels the same way), `tile`, `halo`,
+  `part` (the part of a multi-part file, by name or index; empty for single-part files).
 
 A cache is refused when its format, model id or layout fingerprint does not match what it is used with.
 """
@@ -42,16 +43,20 @@ def layout_fingerprint(img: DeepImage) -> str:
     return h.hexdigest()[:16]
 
 
-def cache_path(folder: str, output: str) -> str:
+def cache_path(folder: str, output: str, part: str | None = None) -> str:
+    """`folder/<output name>.ranadcache`, or `<output name>.<part>.ranadcache` for one of several denoised parts
+    of a multi-part file."""
     name = os.path.basename(output)
     if name.lower().endswith(".exr"):
         name = name[:-4]
+    if part is not None:
+        name += "." + "".join(c if c.isalnum() or c in "._-" else "_" for c in part)
     return os.path.join(folder, name + SUFFIX)
 
 
 def write_cache(path: str, img: DeepImage, result, model_id: str, model_spec: str, input_path: str,
                 frame: int | None, tile: int, halo: int, window_paths: list | None = None,
-                overrides: dict | None = None) -> None:
+                overrides: dict | None = None, part: str | None = None) -> None:
     from safetensors.numpy import save_file
 
     tensors = {"z_stats": np.asarray(result.z_stats, np.float64).reshape(-1, 2)}
@@ -64,7 +69,7 @@ def write_cache(path: str, img: DeepImage, result, model_id: str, model_spec: st
             "window": json.dumps(window), "centre": str(result.centre),
             "frame": "" if frame is None else str(frame), "layout_sha": layout_fingerprint(img),
             "mapping": json.dumps(result.mapping.describe()), "overrides": json.dumps(overrides or {}),
-            "tile": str(tile), "halo": str(halo)}
+            "tile": str(tile), "halo": str(halo), "part": part or ""}
     with atomic_output(path) as tmp:
         save_file(tensors, tmp, metadata=meta)
 

@@ -184,19 +184,23 @@ def denoise_frame(model, img: DeepImage, mapping: ChannelMap | None = None, tile
 
 def denoise_window(model, images: list, centre: int, mapping: ChannelMap | None = None, tile: int | None = None,
                    halo: int | None = None, keep_noisy: str | None = None, want_embeddings: bool = False,
-                   progress=None) -> FrameResult:
+                   progress=None, flows: list | None = None) -> FrameResult:
     """Denoise frame `centre` of `images` (a window of consecutive frames; neighbours are motion-compensated onto
-    it). `tile`: tile size in pixels (None: the whole frame); `halo`: None for the model's receptive field;
-    `keep_noisy`: a prefix under which the noisy versions of the replaced channels are kept; `progress(n)` is
-    called per tile. A single-frame model uses the centre frame only."""
+    it, in display coordinates where their data windows differ). `tile`: tile size in pixels (None: the whole
+    frame); `halo`: None for the model's receptive field; `keep_noisy`: a prefix under which the noisy versions
+    of the replaced channels are kept; `progress(n)` is called per tile; `flows`: per frame, None or its
+    per-pixel flow [H, W, 4] (motion.compensate). A single-frame model uses the centre frame only."""
     from .motion import compensate
 
     cross = is_cross_frame(model)
     if not cross:
-        images, centre = [images[centre]], 0
+        images, centre, flows = [images[centre]], 0, None
     img = images[centre]
     mapping = mapping or detect(img)
-    moved, dropped = compensate(images, centre, motion=mapping.motion) if len(images) > 1 else (images, 0)
+    if len(images) > 1:
+        moved, dropped = compensate(images, centre, flows=flows, motion=mapping.motion)
+    else:
+        moved, dropped = images, 0
     frames = [_model_frame(m, mapping, model_features(model)) for m in moved]
     c = frames[centre]
     n = c.srt.num_bins

@@ -335,8 +335,50 @@ def displacement(frames: list, index: int, centre: int, flows: list | None = Non
 
 def compensate(frames: list, centre: int, flows: list | None = None,
                motion: MotionSpec | None = None) -> tuple[list, int]:
-    """Every frame of a window moved onto frame `centre`; returns (frames, bins dropped in all).
-    `motion`: the MotionSpec of the shot's channel map (default: ranad's canonical motion channels)."""
+    """Every frame of a window moved onto frame `centre`, in the centre frame's data window; returns (frames, bins
+    dropped in all). `motion`: the MotionSpec of the shot's channel map (default: ranad's canonical motion
+    channels); `flows`: per frame, None or [H, W, 4] per-pixel flow over that frame's data window (see
+    `_Window.vectors`).
+
+    Frames whose data windows differ (auto-cropped renders) are compensated in display coordinates: every frame
+    is placed, by its window's offset, into the union of the windows, moved there, and the moved neighbours are
+    cut to the centre frame's window (bins outside it count as dropped)."""
+    windows = [f.data_window for f in frames]
+    target = windows[centre]
+    if all(w == target for w in windows):
+        return _compensate(frames, centre, flows, motion)
+    union = (min(w[0] for w in windows), min(w[1] for w in windows), max(w[2] for w in windows),
+             max(w[3] for w in windows))
+    placed = [f if f.data_window == union else f.crop(union) for f in frames]
+    placed_flows = None if flows is None else [None if fl is None else place_field(fl, w, union)
+                                               for fl, w in zip(flows, windows)]
+    moved, dropped = _compensate(placed, centre, placed_flows, motion)
+    out = []
+    for i, m in enumerate(moved):
+        if i == centre:
+            out.append(frames[centre])
+            continue
+        cut = m.crop(target)
+        dropped += m.num_bins - cut.num_bins
+        out.append(cut)
+    return out, dropped
+
+
+def place_field(field: np.ndarray, window, target) -> np.ndarray:
+    """A per-pixel array [H, W, C] over data window `window` placed into data window `target` (display
+    coordinates; NaN where `window` does not cover `target`)."""
+    field = np.asarray(field, np.float32)
+    x0, y0, x1, y1 = target
+    out = np.full((y1 - y0 + 1, x1 - x0 + 1, field.shape[2]), np.nan, np.float32)
+    ox0, oy0 = max(x0, window[0]), max(y0, window[1])
+    ox1, oy1 = min(x1, window[2]), min(y1, window[3])
+    if ox0 <= ox1 and oy0 <= oy1:
+        out[oy0 - y0:oy1 - y0 + 1, ox0 - x0:ox1 - x0 + 1] = \
+            field[oy0 - window[1]:oy1 - window[1] + 1, ox0 - window[0]:ox1 - window[0] + 1]
+    return out
+
+
+def _compensate(frames: list, centre: int, flows: list | None, motion: MotionSpec | None) -> tuple[list, int]:
     win = _Window(frames, motion, flows)
     out, dropped = [], 0
     for i, img in enumerate(frames):

@@ -20,7 +20,7 @@ from . import cache as cache_io
 from .channels import detect, motion_candidates
 from .denoise import choose_tile, denoise_window, halo_for, is_cross_frame
 from .errors import RanadError
-from .exr import read_deep, read_header, resolve_part, write_deep
+from .exr import read_deep, read_header, resolve_part, write_parts
 
 
 @dataclass
@@ -37,6 +37,7 @@ class ShotOptions:
     window: int = 1                                  # frames per window (cross-frame models only)
     aovs: str | None = None                          # glob of AOV layers denoised with the same kernels
     kind: str = "auto"                               # deepz / deepoid: every frame must be of that kind
+    parts: tuple = ()                                # --part: names or indices; () = every deep part with colour
 
 
 @dataclass
@@ -51,17 +52,88 @@ class ShotSummary:
     no_motion: bool = False                          # a cross-frame window ran without any motion data
 
 
-def prescan(frames) -> None:
-    """Check every input's header before any work: deep, and one data window for the whole sequence."""
+REQUIRED = ("R", "G", "B", "A", "Z")
+
+
+def part_label(layout, index: int) -> str:
+    """How messages name a part: 'part 1 'rgba.right'' (or 'part 1')."""
+    name = layout.parts[index].name
+    return f"part {index} {name!r}" if name else f"part {index}"
+
+
+def part_key(layout, index: int):
+    """The part's name where it has one (how the same part is found in the other frames), else its index."""
+    return layout.parts[index].name or index
+
+
+def select_parts(layout, path: str, wanted=(), overrides: dict | None = None) -> list[int]:
+    """The deep parts of a file to denoise: `wanted` (--part names or indices, each a deep part whose channels
+    `ranad denoise` can read), or by default every deep part with colour (R, G, B, A, Z). Every other part is
+    passed through. RanadError naming the file and part when a wanted part is flat or unreadable, or when no
+    part qualifies."""
+    from .channels import detect_names
+
+    def check(i: int) -> None:
+        names = [c.name for c in layout.parts[i].channels if c.type != "uint"]
+        try:
+            detect_names(names, overrides, path)
+        except RanadError as e:
+            raise RanadError(f"{part_label(layout, i)}: {e.problem}" if layout.multipart else e.problem,
+                             path) from None
+
+    out = []
+    for w in wanted or ():
+        i = resolve_part(layout, w, path)
+        if not layout.part_is_deep(i):
+            raise RanadError(f"--part {w}: {part_label(layout, i)} is not deep (flat EXR part)", path)
+        check(i)
+        if i not in out:
+            out.append(i)
+    if out:
+        return out
+    deep = [i for i in range(len(layout.parts)) if layout.part_is_deep(i)]
+    if not deep:
+        raise RanadError("not a deep image (flat EXR); ranad needs deep EXRs", path)
+    out = [i for i in deep if {c.name for c in layout.parts[i].channels} >= set(REQUIRED)]
+    if not out:
+        check(deep[0])          # raises: the missing required channels
+    return out
+
+
+def prescan(frames, opts: "ShotOptions | None" = None) -> None:
+    """Check every input's header before any work: the parts to denoise exist and are readable deep parts, the
+    same in every frame, each with one display window for the whole sequence (data windows may differ from
+    frame to frame: each frame is denoised and written at its own)."""
+    opts = opts or ShotOptions()
     first = None
     for frame in frames:
         layout = read_header(frame.path)
-        part = layout.parts[resolve_part(layout, None, frame.path)]
+        chosen = select_parts(layout, frame.path, opts.parts, opts.overrides)
+        found = {part_key(layout, i): layout.parts[i].display_window for i in chosen}
         if first is None:
-            first = (frame.path, part.data_window)
-        elif part.data_window != first[1]:
-            raise RanadError(f"data window {part.data_window} differs from {first[1]} of {first[0]} "
-                             "(frames of a sequence must match)", frame.path)
+            first = (frame.path, found)
+            continue
+        if list(found) != list(first[1]):
+            raise RanadError(f"denoises parts {list(found)}, the first frame {first[0]} parts {list(first[1])} "
+                             "(frames of a sequence must have the same parts)", frame.path)
+        for key, disp in found.items():
+            if disp != first[1][key]:
+                where = f" of part {key!r}" if len(found) > 1 else ""
+                raise RanadError(f"display window {disp}{where} differs from {first[1][key]} of {first[0]} "
+                                 "(frames of a sequence must share a display window)", frame.path)
+
+
+def first_frame(path: str, opts: "ShotOptions"):
+    """What a shot's report starts with, from its first frame: (the first part to denoise, its ChannelMap, its
+    kind 'deepz'/'deepoid' (checked against opts.kind), the labels of the parts denoised, or [] for a
+    single-part file)."""
+    layout = read_header(path)
+    chosen = select_parts(layout, path, opts.parts, opts.overrides)
+    img = read_deep(path, part=part_key(layout, chosen[0]) if layout.multipart else None)
+    mapping = detect(img, opts.overrides, path)
+    found = check_kind(img, opts.kind, path)
+    labels = [part_label(layout, i) for i in chosen] if layout.multipart else []
+    return img, mapping, found, labels
 
 
 def frame_memory(img) -> float:
@@ -110,16 +182,18 @@ def window_of(frame, sequence: list, window: int) -> tuple[list, int]:
 
 
 class FrameStore:
-    """Frames read once and kept while a window may still need them (the shot is processed in order)."""
+    """Frames (one deep part each) read once and kept while a window may still need them (the shot is processed
+    in order)."""
 
     def __init__(self, keep: int):
         self.keep, self.images = max(1, keep), {}
 
-    def get(self, frame):
-        img = self.images.pop(frame.path, None)
+    def get(self, frame, part=None):
+        key = (frame.path, part)
+        img = self.images.pop(key, None)
         if img is None:
-            img = read_deep(frame.path)
-        self.images[frame.path] = img
+            img = read_deep(frame.path, part=part)
+        self.images[key] = img
         while len(self.images) > self.keep:
             self.images.pop(next(iter(self.images)))
         return img
@@ -175,15 +249,20 @@ def denoise_shot(jobs, loaded, opts: ShotOptions, frame_bar=None, tile_bar=None,
                  sequence: list | None = None, warn=None) -> ShotSummary:
     """jobs: [(Frame, output path)]; loaded: model.store.LoadedModel; `sequence`: every frame of the shot (the
     neighbours of a shard's frames; default: the jobs' frames). `frame_bar`/`tile_bar`: callables (n) for
-    progress; `tile_bar.reset(total)` is called per frame when present. `on_frame(job, image, result)` is called
-    after each frame is written; `warn(message)` as soon as a warning arises (it is kept in the summary too)."""
+    progress; `tile_bar.reset(total)` is called per part of each frame when present. `on_frame(job, image,
+    result)` is called after each frame is written (with its first denoised part); `warn(message)` as soon as a
+    warning arises (it is kept in the summary too).
+
+    Every deep part `select_parts` picks (--part, or each deep part with colour) is denoised with the same part
+    of the neighbouring frames (found by name, else by index); the output holds every part of the input, the
+    others copied byte for byte (exr.write_parts). Each frame keeps its own data window."""
     summary = ShotSummary()
     model = loaded.model
     halo = halo_for(model) if opts.halo is None else opts.halo
     window = opts.window if is_cross_frame(model) else 1
     sequence = sequence or [f for f, _ in jobs]
-    store = FrameStore(window + 1)
-    first = None
+    store = None
+    first_display = {}
     for frame, out in jobs:
         t0 = time.perf_counter()
         if opts.skip_existing and os.path.exists(out):
@@ -192,60 +271,79 @@ def denoise_shot(jobs, loaded, opts: ShotOptions, frame_bar=None, tile_bar=None,
                 frame_bar(1)
             continue
         members, centre = window_of(frame, sequence, window)
-        images = [store.get(f) for f in members]
-        img = images[centre]
-        if first is None:
-            first = (frame.path, img.data_window)
-        elif img.data_window != first[1]:
-            raise RanadError(f"data window {img.data_window} differs from {first[1]} of {first[0]} "
-                             "(frames of a sequence must match)", frame.path)
-        mapping = detect(img, opts.overrides, frame.path)
-        if opts.kind != "auto":                     # guess_kind sorts every bin: only when it is checked
-            check_kind(img, opts.kind, frame.path)
-        bad = count_nonfinite(img)                  # every channel, not only those the model reads
-        if bad and opts.strict:
-            raise RanadError(f"{bad} bin(s) with NaN/Inf values", frame.path)
-        if len(images) > 1 and not summary.no_motion:
-            from .motion import has_any_motion
-
-            if not has_any_motion(images, mapping.motion):
-                summary.no_motion = True
-                msg = no_motion_message(img)
-                summary.messages.append(msg)
-                if warn:
-                    warn(msg)
-        for f, other in zip(members, images):
-            if other.data_window != img.data_window:
-                raise RanadError(f"data window {other.data_window} differs from {img.data_window} of {frame.path} "
-                                 "(frames of a sequence must match)", f.path)
-        tile = opts.tile or choose_tile(img.offsets, img.width, img.height, halo,
-                                        max(opts.max_memory - len(images) * frame_memory(img), 256e6), len(images))
-        ntiles = sum(1 for _ in range(0, img.height, tile)) * sum(1 for _ in range(0, img.width, tile))
-        if tile_bar is not None and hasattr(tile_bar, "reset"):
-            tile_bar.reset(ntiles)
-        result = denoise_window(model, images, centre, mapping, tile, halo, opts.keep_noisy,
-                                opts.cache_dir is not None or bool(opts.aovs), tile_bar)
-        if opts.aovs:
-            result.image = with_denoised_aovs(model, images, centre, mapping, result, opts.aovs, frame.path)
-        nonfinite = max(result.nonfinite, bad)
-        if nonfinite:
-            msg = f"{frame.path}: {nonfinite} bin(s) with NaN/Inf values"
-            if opts.strict:
-                raise RanadError(f"{nonfinite} bin(s) with NaN/Inf values", frame.path)
-            summary.messages.append(msg + " (replaced in every channel: depth with the frame's largest finite "
-                                          "depth, any other value with 0)")
-        write_deep(out, result.image)
-        if opts.cache_dir:
-            cache_io.write_cache(cache_io.cache_path(opts.cache_dir, out), img, result, loaded.model_id,
-                                 opts.model_spec or "", frame.path, frame.frame, tile, halo,
-                                 [m.path for m in members] if is_cross_frame(model) else None, opts.overrides)
+        layout = read_header(frame.path)
+        chosen = select_parts(layout, frame.path, opts.parts, opts.overrides)
+        if store is None:
+            store = FrameStore((window + 1) * len(chosen))
+        replaced, reported = {}, False
+        for index in chosen:
+            key = part_key(layout, index)
+            part = None if not layout.multipart else key
+            where = frame.path if not layout.multipart else f"{frame.path} ({part_label(layout, index)})"
+            images = [store.get(f, part) for f in members]
+            img = images[centre]
+            disp = first_display.setdefault(key, (frame.path, img.display_window))
+            for f, other in zip(members, images):
+                if other.display_window != disp[1]:
+                    raise RanadError(f"display window {other.display_window} differs from {disp[1]} of {disp[0]} "
+                                     "(frames of a sequence must share a display window)", f.path)
+            result, bad = _denoise_part(model, images, centre, members, where, opts, summary, halo, tile_bar, warn)
+            replaced[index] = result.image
+            if opts.cache_dir:
+                cache = cache_io.cache_path(opts.cache_dir, out, None if len(chosen) == 1 else str(key))
+                cache_io.write_cache(cache, img, result, loaded.model_id, opts.model_spec or "", frame.path,
+                                     frame.frame, result.tile, halo,
+                                     [m.path for m in members] if is_cross_frame(model) else None, opts.overrides,
+                                     part=str(key) if layout.multipart else None)
+            summary.bins += result.bins
+            summary.nonfinite += max(result.nonfinite, bad)
+            summary.dropped += result.dropped
+            if on_frame and not reported:
+                pending = (img, result)
+                reported = True
+        write_parts(out, frame.path, replaced)
         summary.frames += 1
-        summary.bins += result.bins
-        summary.nonfinite += nonfinite
-        summary.dropped += result.dropped
         summary.seconds += time.perf_counter() - t0
         if on_frame:
-            on_frame((frame, out), img, result)
+            on_frame((frame, out), *pending)
         if frame_bar:
             frame_bar(1)
     return summary
+
+
+def _denoise_part(model, images, centre, members, where, opts, summary, halo, tile_bar, warn):
+    """One deep part of a frame, with the same part of its neighbours: checks, then denoise_window; returns
+    (FrameResult with .tile set, NaN/Inf bins found in any channel)."""
+    img = images[centre]
+    mapping = detect(img, opts.overrides, where)
+    if opts.kind != "auto":                     # guess_kind sorts every bin: only when it is checked
+        check_kind(img, opts.kind, where)
+    bad = count_nonfinite(img)                  # every channel, not only those the model reads
+    if bad and opts.strict:
+        raise RanadError(f"{bad} bin(s) with NaN/Inf values", where)
+    if len(images) > 1 and not summary.no_motion:
+        from .motion import has_any_motion
+
+        if not has_any_motion(images, mapping.motion):
+            summary.no_motion = True
+            msg = no_motion_message(img)
+            summary.messages.append(msg)
+            if warn:
+                warn(msg)
+    tile = opts.tile or choose_tile(img.offsets, img.width, img.height, halo,
+                                    max(opts.max_memory - len(images) * frame_memory(img), 256e6), len(images))
+    ntiles = sum(1 for _ in range(0, img.height, tile)) * sum(1 for _ in range(0, img.width, tile))
+    if tile_bar is not None and hasattr(tile_bar, "reset"):
+        tile_bar.reset(ntiles)
+    result = denoise_window(model, images, centre, mapping, tile, halo, opts.keep_noisy,
+                            opts.cache_dir is not None or bool(opts.aovs), tile_bar)
+    result.tile = tile
+    if opts.aovs:
+        result.image = with_denoised_aovs(model, images, centre, mapping, result, opts.aovs, where)
+    nonfinite = max(result.nonfinite, bad)
+    if nonfinite:
+        if opts.strict:
+            raise RanadError(f"{nonfinite} bin(s) with NaN/Inf values", where)
+        summary.messages.append(f"{where}: {nonfinite} bin(s) with NaN/Inf values (replaced in every channel: depth "
+                                "with the frame's largest finite depth, any other value with 0)")
+    return result, bad

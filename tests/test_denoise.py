@@ -112,10 +112,12 @@ def copy_shot(dst: Path, frames=(0, 1, 2)) -> str:
 def test_bad_inputs_fail_with_one_line_and_write_nothing(tmp_path, model_file):
     out = tmp_path / "out"
     out.mkdir()
-    # mismatched resolution inside a sequence
+    # mismatched resolution (display window) inside a sequence; data windows may differ (tests/test_windows.py)
     pattern = copy_shot(tmp_path / "a")
     img = read_deep(FRAME)
-    write_deep(tmp_path / "a" / "beauty.0002.exr", img.crop((0, 0, 31, 31)))
+    small = img.crop((0, 0, 31, 31))
+    small.display_window = (0, 0, 31, 31)
+    write_deep(tmp_path / "a" / "beauty.0002.exr", small)
     r = run("denoise", pattern, "-o", out / "d.####.exr", "--model", model_file)
     assert r.exit_code == 2 and "differs from" in r.output and "beauty.0002.exr" in r.output
     assert r.output.count("\n") == 1 and not list(out.iterdir())

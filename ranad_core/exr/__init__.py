@@ -21,7 +21,8 @@ from .header import (ByteSource, ExrLayout, FileSource, as_source, check_part_si
 IoMode = Literal["auto", "oiio", "fast"]
 _io_mode: IoMode = "auto"
 
-__all__ = ["read_deep", "read_part", "write_deep", "write_parts", "read_layout", "set_io_mode", "get_io_mode", "DeepImage", "ExrLayout"]
+__all__ = ["read_deep", "read_part", "write_deep", "write_parts", "read_layout", "set_io_mode", "get_io_mode",
+           "DeepImage", "ExrLayout"]
 
 
 def set_io_mode(mode: IoMode) -> None:
