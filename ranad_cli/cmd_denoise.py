@@ -77,9 +77,17 @@ def parse_bytes(text: str) -> float:
 @click.option("--part", "parts", multiple=True, metavar="NAME|INDEX",
               help="Denoise this deep part of multi-part (e.g. stereo) files; repeatable. Default: every deep part "
                    "with R, G, B, A, Z. The other parts are copied to the output byte for byte.")
+@click.option("--flow", default=None, metavar="PATTERN",
+              help="Flat EXRs (one per frame, e.g. flow.####.exr) with per-pixel motion, used where the deep frames "
+                   "have no per-bin motion; needs --flow-direction. Units and axes as --motion-units/--motion-y/"
+                   "--shutter/--fps say (default pixels per frame, y down).")
+@click.option("--flow-direction", type=click.Choice(["prev", "next"]), default=None,
+              help="What the --flow files hold: each pixel's motion to the previous or to the next frame.")
+@click.option("--flow-channels", default=None, metavar="X,Y",
+              help="The two channels of the --flow files (default: the files' only x/y pair, e.g. X,Y or R,G).")
 def denoise_cmd(inputs, output, frames, model, device, threads, kind, maps, preset, motion_units, fps, shutter,
                 motion_y, keep_noisy, tile, halo, max_memory, cache_dir, skip_existing, shard, strict, window, aovs,
-                reference, parts):
+                reference, parts, flow, flow_direction, flow_channels):
     """Denoise deep EXR INPUTS (files or patterns such as beauty.####.exr) into deep EXRs with the same pixels,
     bins, bin order, channels, ids and header: diffuse, specular, alpha and depth are denoised and the beauty
     is rebuilt from them.
@@ -123,7 +131,9 @@ def denoise_cmd(inputs, output, frames, model, device, threads, kind, maps, pres
             raise RanadError(f"cannot create the cache folder ({e.strerror or e})", cache_dir) from None
     opts = ShotOptions(model_spec=model, overrides=overrides, tile=tile, halo=halo, max_memory=budget,
                        keep_noisy=keep_noisy, cache_dir=cache_dir, skip_existing=skip_existing, strict=strict,
-                       aovs=aovs, kind=kind, parts=tuple(parts))
+                       aovs=aovs, kind=kind, parts=tuple(parts), flow=flow, flow_direction=flow_direction,
+                       flow_channels=None if flow_channels is None else
+                       tuple(c.strip() for c in flow_channels.split(",") if c.strip()))
     prescan(frames_list, opts)
     if model is None:  # the cross-frame model whenever frames have neighbours
         from ranad_core.model.store import default_model
@@ -136,7 +146,8 @@ def denoise_cmd(inputs, output, frames, model, device, threads, kind, maps, pres
     click.echo(f"model {loaded.model_id}; {'deep-OID' if found == 'deepoid' else 'deep-Z'} input"
                f"{'' if kind == 'auto' else ' (--kind ' + kind + ', checked on every frame)'}; "
                + (f"parts: {', '.join(labels)} (the others copied); " if labels else "")
-               + f"channels: {mapping.mode()}; motion: {mapping.motion.describe()}", err=True)
+               + f"channels: {mapping.mode()}; motion: {mapping.motion.describe()}"
+               + (f"; per-pixel flow: {flow} (to the {flow_direction} frame)" if flow else ""), err=True)
     scores = []
 
     def on_frame(job, img, result):

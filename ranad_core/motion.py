@@ -13,8 +13,10 @@ Where motion comes from (channel names and unit conversion live in channels.py, 
   (minus) the vector of the frame k+1 bin that lands on its pixel with the closest depth, or, where none lands,
   the inverted per-pixel field (the front-most landing bin's, holes filled from their neighbours). Symmetrically
   without `motion_prev`, a frame after the centre is carried back with frame k-1's `motion_next`.
-- per-pixel flow (when the deep file has no per-bin motion): arrays [H, W, 4] per frame in the order
-  motion_prev.X, motion_prev.Y, motion_next.X, motion_next.Y; every bin of a pixel moves with its pixel.
+- per-pixel flow (when the deep file has no per-bin motion in a direction; `ranad denoise --flow`, read by
+  flow.py): arrays [H, W, 4] per frame over its data window, canonical units, in the order motion_prev.X,
+  motion_prev.Y, motion_next.X, motion_next.Y (NaN for a direction not given); every bin of a pixel moves with
+  its pixel, and a missing direction is carried back from the neighbour's flow like per-bin motion.
 - none of these: no motion (the frames are assumed aligned; `ranad denoise` warns).
 
 Frames two or more steps away are moved hop by hop: the first hop with the frame's own motion, each further hop
@@ -241,8 +243,16 @@ class _Window:
         self._vec, self._field, self._inv, self._bins, self._cand = {}, {}, {}, {}, {}
 
     def vectors(self, k: int, name: str):
+        """[N, 2] motion of frame k's bins towards `name`: its per-bin channels, else its per-pixel flow in that
+        direction (every bin of a pixel moves with the pixel), else None."""
         if (k, name) not in self._vec:
-            self._vec[k, name] = self.spec.vectors(self.frames[k], name)
+            v = self.spec.vectors(self.frames[k], name)
+            if v is None and self.flows is not None and self.flows[k] is not None:
+                col = 2 if name == NEXT else 0
+                flow = np.asarray(self.flows[k], np.float32).reshape(-1, 4)[:, col:col + 2]
+                if not np.isnan(flow).all():
+                    v = np.nan_to_num(flow[self.frames[k].pixel_index()], nan=0.0, posinf=0.0, neginf=0.0)
+            self._vec[k, name] = v
         return self._vec[k, name]
 
     def inverse(self, k: int, name: str):

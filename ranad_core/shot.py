@@ -38,6 +38,9 @@ class ShotOptions:
     aovs: str | None = None                          # glob of AOV layers denoised with the same kernels
     kind: str = "auto"                               # deepz / deepoid: every frame must be of that kind
     parts: tuple = ()                                # --part: names or indices; () = every deep part with colour
+    flow: str | None = None                          # --flow: flat EXR per frame (pattern) with per-pixel motion
+    flow_direction: str | None = None                # prev | next
+    flow_channels: tuple | None = None               # its x, y channels (default: the file's only pair)
 
 
 @dataclass
@@ -100,13 +103,46 @@ def select_parts(layout, path: str, wanted=(), overrides: dict | None = None) ->
     return out
 
 
+def flow_file(opts: "ShotOptions", frame) -> str:
+    """The --flow file of a frame: the pattern filled with its number (a plain name for a plain input)."""
+    from .exr.sequence import format_frame, is_pattern
+
+    if not is_pattern(opts.flow):
+        return opts.flow
+    if frame.frame is None:
+        raise RanadError(f"has no frame number to fill the --flow pattern {opts.flow!r}", frame.path)
+    return format_frame(opts.flow, frame.frame)
+
+
+def check_flow_options(opts: "ShotOptions") -> None:
+    """--flow needs --flow-direction; --flow-direction and --flow-channels need --flow; --cache does not record
+    the flow (ranad aov would compensate without it), so the two are refused together."""
+    from .flow import DIRECTIONS
+
+    if opts.flow is None:
+        if opts.flow_direction or opts.flow_channels:
+            raise RanadError("--flow-direction/--flow-channels only apply with --flow PATTERN", None)
+        return
+    if opts.flow_direction not in DIRECTIONS:
+        raise RanadError("--flow needs --flow-direction prev|next (which frame the flow points to)", None)
+    if opts.flow_channels is not None and len(opts.flow_channels) != 2:
+        raise RanadError(f"--flow-channels {','.join(opts.flow_channels)}: give two channels, x then y", None)
+    if opts.cache_dir:
+        raise RanadError("--cache does not record --flow yet (ranad aov would compensate without it); use --aovs "
+                         "in the same run", None)
+
+
 def prescan(frames, opts: "ShotOptions | None" = None) -> None:
     """Check every input's header before any work: the parts to denoise exist and are readable deep parts, the
     same in every frame, each with one display window for the whole sequence (data windows may differ from
     frame to frame: each frame is denoised and written at its own)."""
     opts = opts or ShotOptions()
+    check_flow_options(opts)
     first = None
     for frame in frames:
+        if opts.flow and not os.path.isfile(flow_file(opts, frame)):
+            raise RanadError("no such file (the --flow of " + os.path.basename(frame.path) + ")",
+                             flow_file(opts, frame))
         layout = read_header(frame.path)
         chosen = select_parts(layout, frame.path, opts.parts, opts.overrides)
         found = {part_key(layout, i): layout.parts[i].display_window for i in chosen}
@@ -143,7 +179,7 @@ def frame_memory(img) -> float:
     return 4.0 * img.values.nbytes + 64.0 * img.num_bins
 
 
-def with_denoised_aovs(model, images, centre, mapping, result, pattern: str, source: str):
+def with_denoised_aovs(model, images, centre, mapping, result, pattern: str, source: str, flows=None):
     """result.image with the AOV layers matching `pattern` replaced by their kernel-reuse denoising."""
     from .aov import aov_layers, denoise_aovs
 
@@ -151,7 +187,8 @@ def with_denoised_aovs(model, images, centre, mapping, result, pattern: str, sou
     layers = aov_layers(img.channels, pattern)
     if not layers:
         raise RanadError(f"no AOV layers match {pattern!r} (layers with .R/.G/.B channels)", source)
-    out = denoise_aovs(model, images, centre, mapping, layers, result.embeddings, result.perms, result.offsets)
+    out = denoise_aovs(model, images, centre, mapping, layers, result.embeddings, result.perms, result.offsets,
+                       flows)
     vals = result.image.values.copy()
     for layer, chans in layers.items():
         for i, c in enumerate(chans):
@@ -287,7 +324,13 @@ def denoise_shot(jobs, loaded, opts: ShotOptions, frame_bar=None, tile_bar=None,
                 if other.display_window != disp[1]:
                     raise RanadError(f"display window {other.display_window} differs from {disp[1]} of {disp[0]} "
                                      "(frames of a sequence must share a display window)", f.path)
-            result, bad = _denoise_part(model, images, centre, members, where, opts, summary, halo, tile_bar, warn)
+            flows = None
+            if opts.flow and len(images) > 1:
+                from .flow import read_flow
+
+                flows = [read_flow(flow_file(opts, f), im, opts.flow_direction, opts.flow_channels, opts.overrides)
+                         for f, im in zip(members, images)]
+            result, bad = _denoise_part(model, images, centre, flows, where, opts, summary, halo, tile_bar, warn)
             replaced[index] = result.image
             if opts.cache_dir:
                 cache = cache_io.cache_path(opts.cache_dir, out, None if len(chosen) == 1 else str(key))
@@ -311,7 +354,7 @@ def denoise_shot(jobs, loaded, opts: ShotOptions, frame_bar=None, tile_bar=None,
     return summary
 
 
-def _denoise_part(model, images, centre, members, where, opts, summary, halo, tile_bar, warn):
+def _denoise_part(model, images, centre, flows, where, opts, summary, halo, tile_bar, warn):
     """One deep part of a frame, with the same part of its neighbours: checks, then denoise_window; returns
     (FrameResult with .tile set, NaN/Inf bins found in any channel)."""
     img = images[centre]
@@ -324,7 +367,7 @@ def _denoise_part(model, images, centre, members, where, opts, summary, halo, ti
     if len(images) > 1 and not summary.no_motion:
         from .motion import has_any_motion
 
-        if not has_any_motion(images, mapping.motion):
+        if not has_any_motion(images, mapping.motion, flows):
             summary.no_motion = True
             msg = no_motion_message(img)
             summary.messages.append(msg)
@@ -336,10 +379,10 @@ def _denoise_part(model, images, centre, members, where, opts, summary, halo, ti
     if tile_bar is not None and hasattr(tile_bar, "reset"):
         tile_bar.reset(ntiles)
     result = denoise_window(model, images, centre, mapping, tile, halo, opts.keep_noisy,
-                            opts.cache_dir is not None or bool(opts.aovs), tile_bar)
+                            opts.cache_dir is not None or bool(opts.aovs), tile_bar, flows)
     result.tile = tile
     if opts.aovs:
-        result.image = with_denoised_aovs(model, images, centre, mapping, result, opts.aovs, where)
+        result.image = with_denoised_aovs(model, images, centre, mapping, result, opts.aovs, where, flows)
     nonfinite = max(result.nonfinite, bad)
     if nonfinite:
         if opts.strict:
