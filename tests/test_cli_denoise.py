@@ -62,18 +62,21 @@ def flat_rgb(img):
 
 
 def test_readme_shot_with_the_shipped_cross_frame_default_and_reference(tmp_path):
-    """The README's main job: a 3-frame shot without --model picks cpu-small-xf-v2, denoises each frame with its
+    """The README's main job: a 3-frame shot without --model picks the shipped cross-frame default
+    (DEFAULT_CROSS_MODEL), denoises each frame with its
     neighbours, and --reference reports the centre frame's SMAPE before and after, which the written files
     confirm (and which must improve)."""
     out = tmp_path / "denoised" / "beauty.####.exr"
     r = run("denoise", SHOT / "noisy_spp16.####.exr", "-o", out, "--reference", SHOT / "reference_spp16.####.exr",
             "--cache", tmp_path / "cache")
     assert r.exit_code == 0, r.output
-    assert re.search(r"model cpu-small-xf-v2@[0-9a-f]+;", r.output), r.output
+    from ranad_core.model.store import DEFAULT_CROSS_MODEL
+
+    assert re.search(rf"model {re.escape(DEFAULT_CROSS_MODEL)}@[0-9a-f]+;", r.output), r.output
     assert "denoised 3 frame(s)" in r.output
     written = sorted(p.name for p in (tmp_path / "denoised").iterdir())
     assert written == ["beauty.0000.exr", "beauty.0001.exr", "beauty.0002.exr"]
-    # frame 1 was denoised with both neighbours (the model's 5-frame window, cut to the shot)
+    # frame 1 was denoised with both neighbours (the model's window, 3 or more frames)
     _, meta = cache_io.read_cache(cache_io.cache_path(str(tmp_path / "cache"),
                                                       str(tmp_path / "denoised" / "beauty.0001.exr")))
     assert [Path(p).name for p in json.loads(meta["window"])] == [f"noisy_spp16.000{f}.exr" for f in (0, 1, 2)]
