@@ -34,6 +34,20 @@ def new_file_mode() -> int:
     return 0o666 & ~mask
 
 
+def _fsync_file(path: str) -> None:
+    with open(path, "rb") as f:
+        os.fsync(f.fileno())
+
+
+def _fsync_dir(folder: str) -> None:
+    with contextlib.suppress(OSError):  # not every file system lets a folder be opened and synced
+        fd = os.open(folder, os.O_RDONLY)
+        try:
+            os.fsync(fd)
+        finally:
+            os.close(fd)
+
+
 @contextlib.contextmanager
 def atomic_output(path: str | os.PathLike, suffix: str | None = None) -> Iterator[str]:
     """Yield a temporary path next to ``path``; rename it onto ``path`` if the block succeeds.
@@ -53,7 +67,9 @@ def atomic_output(path: str | os.PathLike, suffix: str | None = None) -> Iterato
     try:
         yield tmp
         os.chmod(tmp, new_file_mode())       # mkstemp makes 0600 files: give the mode a plain open() would
+        _fsync_file(tmp)                     # the data is on disk before the name points at it
         os.replace(tmp, path)
+        _fsync_dir(folder)                   # and the rename itself survives a power cut
     except BaseException:
         with contextlib.suppress(OSError):
             os.unlink(tmp)
