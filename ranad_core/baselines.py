@@ -22,11 +22,15 @@ EPS = 1e-6
 def _composite(img: DeepImage, names, premultiplied: bool) -> np.ndarray:
     """[P, len(names)] front-to-back composite of sorted `img`; unpremultiplied channels (albedo, normal) are
     weighted by each bin's visible coverage T_i a_i and normalised by the pixel's alpha."""
+    return composite_columns(img, np.stack([img.channel(n) for n in names], 1), premultiplied)
+
+
+def composite_columns(img: DeepImage, cols: np.ndarray, premultiplied: bool) -> np.ndarray:
+    """`_composite` of per-bin columns [N, C] given as an array rather than channel names."""
     a = img.channel("A")[:, None]
-    cols = np.stack([img.channel(n) for n in names], 1)
     vals = cols if premultiplied else cols * a
-    out = flatten_torch(torch.from_numpy(np.concatenate([vals, a], 1)), torch.from_numpy(img.offsets),
-                        len(names)).numpy()
+    out = flatten_torch(torch.from_numpy(np.concatenate([vals, a], 1).astype(np.float32)),
+                        torch.from_numpy(img.offsets), cols.shape[1]).numpy()
     if premultiplied:
         return out[:, :-1]
     return out[:, :-1] / np.maximum(out[:, -1:], EPS)

@@ -15,10 +15,9 @@
 from __future__ import annotations
 
 import numpy as np
-import torch
-
 from ..channels import FLAT_NOISY, PRIOR, PRIOR_NOAUX
-from ..deep import DeepImage, flatten_torch
+from ..baselines import composite_columns
+from ..deep import DeepImage
 from ..errors import RanadError
 
 LUMA = np.array([0.2126, 0.7152, 0.0722], np.float64)
@@ -37,18 +36,6 @@ def beauty(img: DeepImage, residual: np.ndarray | None = None) -> np.ndarray:
     if residual is not None:
         out += residual
     return out
-
-
-def _flat(img: DeepImage, cols: np.ndarray, premultiplied: bool) -> np.ndarray:
-    """[P, C] front-to-back composite of per-bin columns `cols` (bins must be sorted front to back);
-    unpremultiplied columns are weighted by coverage and normalised by the pixel's alpha."""
-    a = img.channel("A").astype(np.float32)[:, None]
-    vals = cols if premultiplied else cols * a
-    out = flatten_torch(torch.from_numpy(np.concatenate([vals, a], 1).astype(np.float32)),
-                        torch.from_numpy(img.offsets), cols.shape[1]).numpy()
-    if premultiplied:
-        return out[:, :-1]
-    return out[:, :-1] / np.maximum(out[:, -1:], 1e-6)
 
 
 def exposure_scale(flat_rgb: np.ndarray) -> float:
@@ -78,15 +65,15 @@ def flat_images(srt: DeepImage, rgb: np.ndarray, guides: bool) -> tuple[np.ndarr
     """(noisy flattened beauty [P, 3], OIDN's denoised one [P, 3]) of a sorted image with per-bin beauty `rgb`.
     OIDN sees the colour divided by the frame's exposure scale (so its output, too, scales with the input)."""
     h, w = srt.height, srt.width
-    flat = _flat(srt, np.maximum(np.nan_to_num(rgb, nan=0.0, posinf=0.0), 0), True)
+    flat = composite_columns(srt, np.maximum(np.nan_to_num(rgb, nan=0.0, posinf=0.0), 0), True)
     if srt.num_bins == 0 or h * w == 0:
         return flat, flat.copy()
     s = exposure_scale(flat)
     img = lambda x: np.ascontiguousarray(x.reshape(h, w, 3), np.float32)  # noqa: E731
     albedo = normal = None
     if guides and all(c in srt.channels for names in AUX for c in names):
-        albedo = img(np.clip(_flat(srt, np.stack([srt.channel(c) for c in AUX[0]], 1), False), 0, 1))
-        normal = img(np.clip(_flat(srt, np.stack([srt.channel(c) for c in AUX[1]], 1), False), -1, 1))
+        albedo = img(np.clip(composite_columns(srt, np.stack([srt.channel(c) for c in AUX[0]], 1), False), 0, 1))
+        normal = img(np.clip(composite_columns(srt, np.stack([srt.channel(c) for c in AUX[1]], 1), False), -1, 1))
     den = _oidn(img(flat / s), albedo, normal).reshape(-1, 3) * s
     return flat, np.maximum(np.nan_to_num(den, nan=0.0, posinf=0.0), 0)
 

@@ -111,14 +111,13 @@ class FrameContext:
 def frame_context(path: Path, features: str = "log1p") -> FrameContext:
     from ..model.inputs import depth_stats
 
-    img = load_noisy(path, features)
-    srt, _ = img.sorted()
+    img = load_noisy(path, features)  # depth_stats and frame_scale do not depend on the bin order
     scale = 1.0
     if features == "prior":
         from ..model.prior import frame_scale
 
         scale = frame_scale(img)
-    return FrameContext(depth_stats(srt), scale)
+    return FrameContext(depth_stats(img), scale)
 
 
 def transform(img: DeepImage, flip_x: bool, flip_y: bool, transpose: bool) -> DeepImage:
