@@ -1,9 +1,14 @@
 """Build and load the C++ RaNA kernels (``cuda/rana_cpu*.cpp``) with torch's JIT extension builder.
 
-Built on first use and cached by torch (``$TORCH_EXTENSIONS_DIR``, default ``~/.cache/torch_extensions``),
-so later runs load in milliseconds. The build is tuned for the CPU it runs on (``-march=native``); the
-extension name carries a hash of the CPU's feature flags so that a cache shared between different
-machines (a render farm's home directory) never hands a binary to a CPU that cannot run it.
+Built on first use (with a message on stderr: it takes a minute or two) and cached, so later runs load in
+milliseconds. The cache folder is ``$RANAD_KERNEL_CACHE`` when set (a folder a render farm shares), else torch's
+(``$TORCH_EXTENSIONS_DIR``, default ``~/.cache/torch_extensions``). The build is tuned for the CPU it runs on
+(``-march=native``); the extension name carries a hash of the CPU's feature flags and of the sources, so a shared
+cache holds one build per CPU type and version and never hands a binary to a CPU that cannot run it. The build
+key holds no paths, so installs in different places share it.
+
+The sources are the package's ``kernels`` folder in an installed wheel (pyproject.toml ships ``cuda/`` there), or
+the source tree's ``cuda/`` in a checkout or an editable install.
 When no compiler is available or the build fails, a warning says so once and callers use the reference.
 """
 
@@ -16,7 +21,14 @@ import warnings
 from functools import lru_cache
 from pathlib import Path
 
-SOURCE_DIR = Path(__file__).resolve().parents[2] / "cuda"
+
+
+def _source_dir() -> Path:
+    packaged = Path(__file__).resolve().parents[1] / "kernels"
+    return packaged if (packaged / "rana_math.h").is_file() else Path(__file__).resolve().parents[2] / "cuda"
+
+
+SOURCE_DIR = _source_dir()
 # the bindings, and the kernel instantiations split so that the build runs them in parallel
 CPU_SOURCES = ("rana_cpu.cpp", "rana_cpu_f32_hb4.cpp", "rana_cpu_f32_hb1.cpp", "rana_cpu_other.cpp")
 CPU_HEADERS = ("rana_math.h", "rana_binding.h", "rana_cpu_kernels.h", "rana_cpu_buffers.h")
@@ -57,13 +69,38 @@ def _check_sources(names) -> None:
         raise BuildUnavailable(f"kernel sources not found in {SOURCE_DIR} ({', '.join(missing)})")
 
 
+def build_folder(name: str) -> Path:
+    """Where extension `name` is built and cached: $RANAD_KERNEL_CACHE/<python and torch version>/name when the
+    variable is set (the binary depends on both), else torch's own folder for it."""
+    import sys
+
+    import torch
+
+    root = os.environ.get("RANAD_KERNEL_CACHE")
+    if not root:
+        from torch.utils.cpp_extension import _get_build_directory  # noqa: PLC0415 - torch's own default
+
+        return Path(_get_build_directory(name, False))
+    abi = f"py{sys.version_info[0]}{sys.version_info[1]}_torch{torch.__version__.replace('+', '_')}"
+    return Path(root).expanduser() / abi / name
+
+
 def _build(what: str, name: str, sources, **kwargs):
-    """torch's JIT build of `sources` (cached by name); any failure becomes BuildUnavailable with its first error."""
+    """torch's JIT build of `sources` into build_folder(name) (reused when built before); any failure becomes
+    BuildUnavailable with its first error. The headers are found beside the sources (quoted includes), so no
+    path enters torch's build key."""
+    import sys
+
     from torch.utils.cpp_extension import load
 
     try:
-        return load(name=name, sources=[str(SOURCE_DIR / n) for n in sources],
-                    extra_include_paths=[str(SOURCE_DIR)], verbose=False, **kwargs)
+        folder = build_folder(name)
+        folder.mkdir(parents=True, exist_ok=True)
+        if not (folder / f"{name}.so").is_file():
+            print(f"ranad: building the {what} RaNA kernels for this machine (once per CPU type and version, a "
+                  f"minute or two) in {folder}", file=sys.stderr, flush=True)
+        return load(name=name, sources=[str(SOURCE_DIR / n) for n in sources], build_directory=str(folder),
+                    verbose=False, **kwargs)
     except Exception as e:  # noqa: BLE001 - any build failure means: use the reference
         lines = str(e).strip().splitlines() or ["unknown error"]
         first_error = next((ln for ln in lines if "error" in ln.lower()), lines[-1])

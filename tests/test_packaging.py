@@ -1,0 +1,88 @@
+"""Packaging: a wheel carries everything a user's install needs, the C++ kernel sources included.
+
+A non-editable install once shipped without ``cuda/``, and the op fell back to the slow reference without a word.
+The wheel test builds the wheel, installs it into a fresh virtual environment (its dependencies, torch and numpy,
+come from this environment's site-packages through a ``.pth`` path entry: a path entry runs no ``.pth`` files, so
+this checkout's editable install stays out of it), and from outside the source tree builds the kernels into an
+empty ``RANAD_KERNEL_CACHE`` and compares the op with the reference.
+"""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import sysconfig
+import tomllib
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def test_package_list_covers_every_package_folder():
+    listed = set(tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["setuptools"]["packages"])
+    found = {".".join(p.parent.relative_to(ROOT).parts) for top in ("ranad_core", "ranad_cli")
+             for p in (ROOT / top).rglob("__init__.py") if "__pycache__" not in p.parts}
+    assert found <= listed, f"packages missing from pyproject.toml: {sorted(found - listed)}"
+    assert listed - found == {"ranad_core.kernels"}  # the one mapped folder (cuda/)
+
+
+def test_kernel_cache_folder_follows_the_environment(monkeypatch, tmp_path):
+    from ranad_core.rana import extension
+
+    monkeypatch.setenv("RANAD_KERNEL_CACHE", str(tmp_path))
+    folder = extension.build_folder("ranad_rana_cpu_x")
+    assert folder.parent.parent == tmp_path and folder.name == "ranad_rana_cpu_x"
+    assert folder.parent.name.startswith(f"py{sys.version_info[0]}{sys.version_info[1]}_torch")
+
+
+SCRIPT = r"""
+import sys, torch
+import ranad_core
+from ranad_core.rana import extension, rana, self_attention_layout
+site = sys.argv[1]
+assert ranad_core.__file__.startswith(site), ranad_core.__file__
+assert str(extension.SOURCE_DIR).startswith(site), extension.SOURCE_DIR
+ext = extension.load_cpu_extension()
+assert ext.__file__.startswith(sys.argv[2]), ext.__file__
+g = torch.Generator().manual_seed(0)
+counts = torch.randint(0, 4, (12 * 12,), generator=g)
+offsets = torch.cat([torch.zeros(1, dtype=torch.int64), counts.cumsum(0)])
+qp, ko, ks = self_attention_layout(offsets, 12, 12)
+q, k, v = (torch.randn(int(offsets[-1]), 2, 8, generator=g) for _ in range(3))
+args = (q, k, v, qp, ko, ks, 2.5)
+out = rana(*args, backend="cpu")
+ref = rana(*args, backend="reference")
+err = (out - ref).abs().max().item()
+assert err < 1e-4, err
+print("ok", err)
+"""
+
+
+def test_wheel_builds_and_uses_the_kernels_outside_the_source_tree(tmp_path):
+    import shutil
+
+    if not (shutil.which(os.environ.get("CXX", "c++")) or shutil.which("g++")):
+        pytest.skip("no C++ compiler on PATH: the kernels cannot be built here")
+    wheels = tmp_path / "wheels"
+    subprocess.run([sys.executable, "-m", "pip", "wheel", str(ROOT), "--no-deps", "--no-build-isolation", "-q",
+                    "-w", str(wheels)], check=True, cwd=tmp_path, capture_output=True)
+    (wheel,) = wheels.glob("ranad-*.whl")
+    env_dir = tmp_path / "fresh"
+    subprocess.run([sys.executable, "-m", "venv", "--without-pip", str(env_dir)], check=True)
+    python = env_dir / "bin" / "python"
+    site = Path(subprocess.run([python, "-c", "import sysconfig; print(sysconfig.get_path('purelib'))"],
+                               check=True, capture_output=True, text=True).stdout.strip())
+    subprocess.run([sys.executable, "-m", "pip", "install", "--no-deps", "-q", "--target", str(site), str(wheel)],
+                   check=True, capture_output=True)
+    (site / "deps.pth").write_text(sysconfig.get_path("purelib") + "\n")
+    cache = tmp_path / "kernel-cache"
+    env = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "TORCH_EXTENSIONS_DIR")}
+    env["RANAD_KERNEL_CACHE"] = str(cache)
+    run = subprocess.run([python, "-c", SCRIPT, str(site), str(cache)], cwd=tmp_path, env=env, capture_output=True,
+                         text=True, timeout=900)
+    assert run.returncode == 0, run.stderr[-3000:]
+    assert run.stdout.startswith("ok")
+    assert "building the C++ RaNA kernels" in run.stderr  # the user is told while the build runs
