@@ -60,7 +60,9 @@ def parse_bytes(text: str) -> float:
               help="Tile size in pixels (default: the largest that fits --max-memory).")
 @click.option("--halo", type=click.IntRange(0), default=None,
               help="Tile halo in pixels (default: the model's receptive field, so tiles match the whole frame).")
-@click.option("--max-memory", default="8G", show_default=True, help="Peak memory to stay under (sets the tiles).")
+@click.option("--max-memory", default="8G", show_default=True, help="Ceiling on the process's peak memory: the tiles get what the "
+              "frames, their working copies and the kernels' buffers leave; a ceiling too small for one 16-pixel "
+              "tile is an error that says how much is needed.")
 @click.option("--cache", "cache_dir", type=click.Path(file_okay=False), default=None,
               help="Folder for the embedding cache `ranad aov` reuses (one .ranadcache file per frame).")
 @click.option("--skip-existing", is_flag=True, help="Skip frames whose output exists (resume a shot).")

@@ -102,19 +102,33 @@ def window_bins(offsets: np.ndarray, width: int, win) -> tuple[np.ndarray, np.nd
     return idx.astype(np.int64), local
 
 
-def choose_tile(offsets: np.ndarray, width: int, height: int, halo: int, budget_bytes: float,
-                frames: int = 1) -> int:
-    """The largest aligned tile whose haloed windows all fit the memory budget (at least ALIGN); `frames`
-    windows of frames share the budget."""
+def _bins_integral(offsets: np.ndarray, width: int, height: int) -> np.ndarray:
     counts = np.diff(offsets).reshape(height, width)
     integral = np.zeros((height + 1, width + 1), np.int64)
     integral[1:, 1:] = counts.cumsum(0).cumsum(1)
+    return integral
+
+
+def _worst_window(integral: np.ndarray, width: int, height: int, tile: int, halo: int) -> int:
+    return max(integral[y1 + 1, x1 + 1] - integral[y0, x1 + 1] - integral[y1 + 1, x0] + integral[y0, x0]
+               for _, (x0, y0, x1, y1) in tile_windows(width, height, tile, halo))
+
+
+def tile_bytes(offsets: np.ndarray, width: int, height: int, tile: int, halo: int, frames: int = 1) -> float:
+    """Model working memory of the fullest haloed window at tile size `tile` (`frames` frames per window)."""
+    return float(_worst_window(_bins_integral(offsets, width, height), width, height, tile, halo)) * BYTES_PER_BIN \
+        * frames
+
+
+def choose_tile(offsets: np.ndarray, width: int, height: int, halo: int, budget_bytes: float,
+                frames: int = 1) -> int:
+    """The largest aligned tile whose haloed windows all fit the memory budget (at least ALIGN, which the caller
+    checks against the budget with tile_bytes); `frames` windows of frames share the budget."""
+    integral = _bins_integral(offsets, width, height)
     limit = max(1, int(budget_bytes // (BYTES_PER_BIN * frames)))
     tile = ALIGN * max(1, math.ceil(max(width, height) / ALIGN))
     while tile > ALIGN:
-        worst = max(integral[y1 + 1, x1 + 1] - integral[y0, x1 + 1] - integral[y1 + 1, x0] + integral[y0, x0]
-                    for _, (x0, y0, x1, y1) in tile_windows(width, height, tile, halo))
-        if worst <= limit:
+        if _worst_window(integral, width, height, tile, halo) <= limit:
             return tile
         tile = max(ALIGN, (tile // 2) // ALIGN * ALIGN)
     return ALIGN

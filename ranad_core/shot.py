@@ -18,7 +18,7 @@ from dataclasses import dataclass, field
 
 from . import cache as cache_io
 from .channels import detect, motion_candidates
-from .denoise import choose_tile, denoise_window, halo_for, is_cross_frame
+from .denoise import ALIGN, choose_tile, denoise_window, halo_for, is_cross_frame, tile_bytes
 from .errors import RanadError
 from .exr import read_deep, read_header, resolve_part, write_parts
 
@@ -172,11 +172,19 @@ def first_frame(path: str, opts: "ShotOptions"):
     return img, mapping, found, labels
 
 
-def frame_memory(img) -> float:
-    """Bytes the pipeline holds per frame besides the model's tile work: the decoded frame, its canonical and
-    sorted copies, the output and per-layer results. Measured: a 1080p frame of 6.5 M bins x 35 channels (0.9 GB
-    of values) peaked at 6.3 GB with 2.6 GB of tile budget, i.e. about 4x the values."""
-    return 4.0 * img.values.nbytes + 64.0 * img.num_bins
+def choose_frame_tile(images, centre, halo: int, max_memory: float, where: str) -> int:
+    """The largest tile that keeps this frame's denoising under the ceiling `max_memory` (memory.py); a RanadError
+    when even the smallest tile does not fit."""
+    from . import memory
+
+    img = images[centre]
+    budget, other = memory.tile_budget(max_memory, images, centre)
+    tile = choose_tile(img.offsets, img.width, img.height, halo, budget, len(images))
+    if tile == ALIGN:
+        need = tile_bytes(img.offsets, img.width, img.height, ALIGN, halo, len(images))
+        if need > budget:
+            raise memory.too_small(max_memory, other, need, ALIGN, halo, where)
+    return tile
 
 
 def with_denoised_aovs(model, images, centre, mapping, result, pattern: str, source: str, flows=None):
@@ -296,6 +304,10 @@ def denoise_shot(jobs, loaded, opts: ShotOptions, frame_bar=None, tile_bar=None,
     summary = ShotSummary()
     model = loaded.model
     halo = halo_for(model) if opts.halo is None else opts.halo
+    if opts.tile is None:
+        from .memory import cap_kernel_cache
+
+        cap_kernel_cache(opts.max_memory)
     window = opts.window if is_cross_frame(model) else 1
     sequence = sequence or [f for f, _ in jobs]
     store = None
@@ -373,8 +385,7 @@ def _denoise_part(model, images, centre, flows, where, opts, summary, halo, tile
             summary.messages.append(msg)
             if warn:
                 warn(msg)
-    tile = opts.tile or choose_tile(img.offsets, img.width, img.height, halo,
-                                    max(opts.max_memory - len(images) * frame_memory(img), 256e6), len(images))
+    tile = opts.tile or choose_frame_tile(images, centre, halo, opts.max_memory, where)
     ntiles = sum(1 for _ in range(0, img.height, tile)) * sum(1 for _ in range(0, img.width, tile))
     if tile_bar is not None and hasattr(tile_bar, "reset"):
         tile_bar.reset(ntiles)

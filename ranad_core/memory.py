@@ -1,0 +1,72 @@
+"""The memory ceiling behind `--max-memory`: how much of it is left for the model's tiles.
+
+The process's peak is what it already holds when a frame starts (torch, the model, the frames read: its resident
+set, measured rather than modelled), plus what denoising the frame adds besides the tiles (working copies of the
+frame and its neighbours, the output: `frame_working_bytes`), plus the idle buffers the C++ kernels keep for reuse
+(bounded by RANAD_RANA_BUFFER_CACHE_MB, which `cap_kernel_cache` sizes to the ceiling), plus the tiles' working
+memory (denoise.BYTES_PER_BIN per bin of the largest haloed window). The tiles get what is left; when that is too
+little for one minimal tile the frame cannot be denoised within the ceiling, and the error says how much it needs.
+"""
+
+from __future__ import annotations
+
+import os
+
+from .errors import RanadError
+
+KERNEL_CACHE_ENV = "RANAD_RANA_BUFFER_CACHE_MB"
+KERNEL_CACHE_DEFAULT_MB = 2048       # the kernels' own default (cuda/rana_cpu_buffers.h)
+MARGIN = 0.04                        # of the ceiling: allocator slack, Python objects, progress bars
+
+
+def resident_bytes() -> int:
+    """This process's resident set now (Linux /proc; 0 where it cannot be read)."""
+    try:
+        with open("/proc/self/statm") as f:
+            return int(f.read().split()[1]) * os.sysconf("SC_PAGE_SIZE")
+    except (OSError, ValueError, IndexError):
+        return 0
+
+
+def cap_kernel_cache(max_memory: float) -> None:
+    """Bounds the kernels' idle-buffer cache to 1/16 of the ceiling (64 MB to its 2 GB default) unless the user set
+    RANAD_RANA_BUFFER_CACHE_MB. Read by the kernels when they first run, so it takes effect in a process that has
+    not run them yet (a `ranad` command)."""
+    if KERNEL_CACHE_ENV not in os.environ:
+        os.environ[KERNEL_CACHE_ENV] = str(int(max(64, min(KERNEL_CACHE_DEFAULT_MB, max_memory / 16 / 2**20))))
+
+
+def kernel_cache_bytes() -> float:
+    try:
+        return float(os.environ.get(KERNEL_CACHE_ENV, KERNEL_CACHE_DEFAULT_MB)) * 2**20
+    except ValueError:
+        return KERNEL_CACHE_DEFAULT_MB * 2**20
+
+
+def frame_working_bytes(images: list, centre: int) -> float:
+    """Bytes a frame's denoising adds to the frames already read, besides the tiles: the centre's canonical and
+    sorted copies, its output and per-layer results (about 3x its values; measured on a 1080p frame of 6.5 M bins
+    x 35 channels), and each neighbour's motion-compensated, sorted copy (about its values)."""
+    c = images[centre]
+    extra = 3.0 * c.values.nbytes + 64.0 * c.num_bins
+    extra += sum(im.values.nbytes + 64.0 * im.num_bins for i, im in enumerate(images) if i != centre)
+    return extra
+
+
+def fmt(n: float) -> str:
+    return f"{n / 2**30:.2f} GB" if n >= 2**30 else f"{n / 2**20:.0f} MB"
+
+
+def tile_budget(max_memory: float, images: list, centre: int) -> tuple[float, float]:
+    """(bytes the tiles may use, bytes everything else takes) under the ceiling `max_memory` for this frame."""
+    other = resident_bytes() + frame_working_bytes(images, centre) + kernel_cache_bytes() + MARGIN * max_memory
+    return max_memory - other, other
+
+
+def too_small(max_memory: float, other: float, minimal_tile: float, tile: int, halo: int, where: str) -> RanadError:
+    """The error for a ceiling that does not fit one minimal tile, with the size that would."""
+    need = other + minimal_tile
+    return RanadError(f"--max-memory {fmt(max_memory)} is too small for this frame: {fmt(other)} is held or needed "
+                      f"besides the tiles (the process, the frames, their working copies, the kernels' buffers) and "
+                      f"one {tile}-pixel tile with its {halo}-pixel halo needs {fmt(minimal_tile)}; use at least "
+                      f"--max-memory {fmt(need * 1.05)}", where)
