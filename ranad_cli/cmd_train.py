@@ -37,8 +37,11 @@ from tqdm import tqdm
 @click.option("--until", default=None, type=click.IntRange(1),
               help="Stop at this step (checkpointed) although the learning-rate schedule runs to --steps: training "
                    "in chunks, each resumed with the same options and a later --until.")
+@click.option("--freeze-spatial", is_flag=True,
+              help="Cross-frame configs with --init: train only the temporal parts (T-Mix, the temporal kernel "
+                   "step and its gate); the single-frame model's weights stay as they are.")
 def train_cmd(datasets, run, config, steps, crop, lr, seed, checkpoint_every, processes, p_no_aux, p_no_split, window,
-              init, temporal_weight, until):
+              init, temporal_weight, until, freeze_spatial):
     """Train on DATASETS (one or several outputs of `ranad synth`, their scenes pooled): centre-frame pairs,
     random crops, flips and transposes, SMAPE on the diffuse and specular bins and on the composited colour plus
     SSIM on it, L1 on alpha and depth. Resumes from RUN/checkpoint.pt when it exists."""
@@ -52,7 +55,8 @@ def train_cmd(datasets, run, config, steps, crop, lr, seed, checkpoint_every, pr
     cfg = TrainConfig(dataset=datasets[0] if len(datasets) == 1 else tuple(datasets), run=run, config=config,
                       steps=steps, crop=crop, lr=lr, seed=seed,
                       checkpoint_every=checkpoint_every, p_no_aux=p_no_aux, p_no_split=p_no_split,
-                      window=window, init=init, temporal_weight=temporal_weight, until=until)
+                      window=window, init=init, temporal_weight=temporal_weight, until=until,
+                      freeze_spatial=freeze_spatial)
     if processes > 1:
         spawn_local(cfg, processes)
         click.echo(f"done: {steps} steps x {processes} processes, log in {run}/train.log")

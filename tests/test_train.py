@@ -290,3 +290,35 @@ def test_training_pools_several_datasets(tmp_path):
     assert torch.load(run / "checkpoint.pt", weights_only=False)["train_config"]["dataset"] == (str(a), str(b))
     r = CliRunner().invoke(cli, ["train", str(a), str(tmp_path / "none"), "-o", str(tmp_path / "r2")])
     assert r.exit_code == 2 and "dataset folder not found" in r.output and "none" in r.output
+
+
+def test_freeze_spatial_trains_only_the_temporal_parts(tmp_path):
+    """--freeze-spatial: after training steps the single-frame part (embedding, U-Nets, spatial reconstruction)
+    is bit for bit the --init model's, while the temporal parts moved; without --init or with a single-frame
+    config it is refused."""
+    from ranad_core.model.store import load_model
+
+    ds = sequence_dataset(tmp_path / "ds")
+    single = tmp_path / "single"
+    r = CliRunner().invoke(cli, ["train", str(ds), "-o", str(single), "--steps", "1", "--crop", "16"])
+    assert r.exit_code == 0, r.output
+    run = tmp_path / "xf"
+    r = CliRunner().invoke(cli, ["train", str(ds), "-o", str(run), "--config", "cpu-small-xf", "--init", str(single),
+                                 "--steps", "3", "--crop", "24", "--lr", "1e-2", "--freeze-spatial"])
+    assert r.exit_code == 0, r.output
+    start = load_model(str(single)).model.state_dict()
+    trained = load_model(str(run)).model.state_dict()
+    for k, v in start.items():
+        if k == "embed.0.weight":   # the frame one-hot columns are appended at zero and stay there
+            w = trained["single." + k]
+            assert torch.equal(w[:, :v.shape[1]], v) and not w[:, v.shape[1]:].any()
+        else:
+            assert torch.equal(trained["single." + k], v), k
+    moved = [k for k, v in trained.items() if not k.startswith("single.") and "gate" in k]
+    assert moved and any(not torch.equal(trained[k], torch.full_like(trained[k], -4.0)) for k in moved
+                         if k.endswith("bias"))
+    for extra, msg in ((["--config", "cpu-small-xf"], "needs --init"), (["--init", str(single)], "cross-frame")):
+        r = CliRunner().invoke(cli, ["train", str(ds), "-o", str(tmp_path / "bad"), "--steps", "1", "--crop", "16",
+                                     "--freeze-spatial", *extra])
+        assert r.exit_code == 2 and msg in r.output, r.output
+        assert not (tmp_path / "bad").exists()

@@ -47,6 +47,7 @@ class TrainConfig:
     init: str | None = None       # cross-frame configs: single-frame weights to start from (model name/file/run)
     temporal_weight: float = 0.0  # cross-frame configs: weight of the temporal loss; > 0 trains on consecutive frames
     until: int | None = None      # stop (with a checkpoint) at this step; the schedule still runs to `steps`
+    freeze_spatial: bool = False  # cross-frame configs: train only the temporal parts; the single-frame model stays
 
 
 def learning_rate(cfg: TrainConfig, step: int) -> float:
@@ -101,6 +102,26 @@ def save_checkpoint(path: str, model, opt, step: int, cfg: TrainConfig, rng: np.
              "model_config": model.config.to_dict(), "train_config": asdict(cfg), "rng": rng.bit_generator.state}
     with atomic_output(path) as tmp:
         torch.save(state, tmp)
+
+
+def check_freeze(cfg: TrainConfig, config) -> None:
+    if cfg.freeze_spatial and config.window <= 1:
+        raise RanadError("--freeze-spatial needs a cross-frame config (e.g. cpu-small-p-xf)", cfg.config)
+    if cfg.freeze_spatial and not cfg.init:
+        raise RanadError("--freeze-spatial needs --init (the single-frame model to keep)", cfg.config)
+
+
+def freeze_spatial(model, cfg: TrainConfig) -> None:
+    """With `cfg.freeze_spatial`, the single-frame part of a cross-frame model (embedding, U-Nets, spatial
+    reconstruction) stops learning: only T-Mix, the temporal step and their gates train. The model then starts as
+    the single-frame one and can only add what the neighbours bring, instead of drifting away from a spatial
+    denoiser trained on many more scenes than the few shots a cross-frame run sees."""
+    if not cfg.freeze_spatial:
+        return
+    check_freeze(cfg, model.config)
+    for name, p in model.named_parameters():
+        if name.startswith("single."):
+            p.requires_grad_(False)
 
 
 def build_model(cfg: TrainConfig, config):
@@ -233,9 +254,11 @@ def train(cfg: TrainConfig, progress=None) -> dict:
     config = get_config(cfg.config)
     cross = config.window > 1
     consecutive = consecutive_pairs(cfg, cross, world)
+    check_freeze(cfg, config)
     os.makedirs(cfg.run, exist_ok=True)
     torch.manual_seed(cfg.seed)
     model = build_model(cfg, config)
+    freeze_spatial(model, cfg)
     opt = torch.optim.AdamW(param_groups(model), lr=cfg.lr, weight_decay=cfg.weight_decay)
     rng = np.random.default_rng(cfg.seed if world == 1 else [cfg.seed, rank])
     step = 0
@@ -266,6 +289,8 @@ def train(cfg: TrainConfig, progress=None) -> dict:
         if result is None:
             continue
         loss, parts = result
+        if not loss.requires_grad:  # frozen spatial part, window without neighbours: nothing here trains
+            continue
         opt.zero_grad()
         loss.backward()
         torch.nn.utils.clip_grad_norm_(model.parameters(), cfg.clip)
