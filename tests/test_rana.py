@@ -286,3 +286,33 @@ def test_downsample_layout_keeps_pixels():
     idx, qp, sparse = downsample_layout(offs, 4, keep)
     assert torch.equal(qp, bin_pixels(offs, 4)[idx]) and int(sparse[-1]) == int(keep.sum())
     assert torch.equal(bin_pixels(sparse, 4), qp)
+
+
+def test_inference_calls_the_kernels_directly_and_equally():
+    """Without a gradient the op calls the kernels directly (the custom op's first call imports torch._dynamo,
+    ~2.4 s per process): the same numbers as through the custom op, and a fresh process denoising a tile never
+    imports torch._dynamo."""
+    import subprocess
+    import sys
+
+    from ranad_core.rana import op
+
+    q, k, v, qp, ko, ks, bias = _inputs("self", 2.5, True, torch.float32)
+    args = (q, k, v, qp, ko, ks[0], ks[1], 2.5, bias, False)
+    with torch.inference_mode():
+        direct = rana(q, k, v, qp, ko, ks, 2.5, bias, backend="cpu")
+        via_op = op.rana_fwd(*args)[0]
+    torch.testing.assert_close(direct, via_op, rtol=0, atol=0)
+    code = ("import sys, torch\n"
+            "from ranad_core.rana import rana, self_attention_layout\n"
+            "offs = torch.arange(0, 2 * 64 + 1, 2)\n"
+            "qp, ko, ks = self_attention_layout(offs, 8, 8)\n"
+            "x = torch.randn(128, 2, 8)\n"
+            "with torch.inference_mode():\n"
+            "    rana(x, x, x, qp, ko, ks, 2.5, backend='cpu')\n"
+            "assert 'torch._dynamo' not in sys.modules\n"
+            "y = x.clone().requires_grad_()\n"
+            "rana(y, x, x, qp, ko, ks, 2.5, backend='cpu').sum().backward()\n"
+            "assert y.grad is not None\n")
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr[-2000:]

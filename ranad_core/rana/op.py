@@ -32,11 +32,8 @@ def _disc_args(radius: float):
     return dy, dx0, dx1, d.R
 
 
-@torch.library.custom_op("ranad::rana_fwd", mutates_args=())
-def rana_fwd(q: torch.Tensor, k: torch.Tensor, v: torch.Tensor, q_pixels: torch.Tensor, k_offsets: torch.Tensor,
-             hk: int, wk: int, radius: float, bias: Optional[torch.Tensor], scalar_lanes: bool = False
-             ) -> tuple[torch.Tensor, torch.Tensor]:
-    """Forward kernels: (out [Nq, H, dv], lse [Nq, H]); lse is -inf for queries with an empty disc."""
+def _forward_kernels(q, k, v, q_pixels, k_offsets, hk, wk, radius, bias, scalar_lanes=False):
+    """The forward kernels themselves (what the custom op runs); called directly when no gradient is wanted."""
     dy, dx0, dx1, R = _disc_args(radius)
     scale = 1.0 / math.sqrt(q.shape[2])
     if q.is_cuda:
@@ -45,6 +42,14 @@ def rana_fwd(q: torch.Tensor, k: torch.Tensor, v: torch.Tensor, q_pixels: torch.
     ext = load_cpu_extension()
     out, lse = ext.forward(q, k, v, q_pixels, k_offsets, hk, wk, dy, dx0, dx1, R, bias, scale, scalar_lanes)
     return out, lse
+
+
+@torch.library.custom_op("ranad::rana_fwd", mutates_args=())
+def rana_fwd(q: torch.Tensor, k: torch.Tensor, v: torch.Tensor, q_pixels: torch.Tensor, k_offsets: torch.Tensor,
+             hk: int, wk: int, radius: float, bias: Optional[torch.Tensor], scalar_lanes: bool = False
+             ) -> tuple[torch.Tensor, torch.Tensor]:
+    """Forward kernels: (out [Nq, H, dv], lse [Nq, H]); lse is -inf for queries with an empty disc."""
+    return _forward_kernels(q, k, v, q_pixels, k_offsets, hk, wk, radius, bias, scalar_lanes)
 
 
 @rana_fwd.register_fake
@@ -161,5 +166,14 @@ def rana(q: torch.Tensor, k: torch.Tensor, v: torch.Tensor, q_pixels: torch.Tens
     k_offsets = k_offsets.to(torch.int64).contiguous()
     if bias is not None:
         bias = bias.to(q.dtype).contiguous()
-    out, _ = rana_fwd(q, k, v, q_pixels, k_offsets, hk, wk, float(radius), bias, backend == "cpu-scalar")
-    return out
+    args = (q, k, v, q_pixels, k_offsets, hk, wk, float(radius), bias, backend == "cpu-scalar")
+    if not _wants_graph(q, k, v, bias):  # inference: the kernels directly, without the dispatcher (whose first
+        return _forward_kernels(*args)[0]  # call of a custom op imports torch._dynamo, ~2.4 s per process)
+    return rana_fwd(*args)[0]
+
+
+def _wants_graph(*tensors) -> bool:
+    """Whether the op must go through the custom op: a gradient may be needed, or torch.compile is tracing."""
+    if torch.compiler.is_compiling():
+        return True
+    return torch.is_grad_enabled() and any(t is not None and t.requires_grad for t in tensors)
