@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import os
 import re
 import sys
@@ -87,9 +88,13 @@ def parse_bytes(text: str) -> float:
               help="What the --flow files hold: each pixel's motion to the previous or to the next frame.")
 @click.option("--flow-channels", default=None, metavar="X,Y",
               help="The two channels of the --flow files (default: the files' only x/y pair, e.g. X,Y or R,G).")
+@click.option("--profile", "profile", is_flag=True,
+              help="After the run, print where the time went: seconds per stage (read, motion, inputs with the "
+                   "flat prior, per-tile gather / backbone / reconstruction / scatter, assemble, AOVs, cache, "
+                   "write) and a per-tile summary (bins with the halo, halo overlap, seconds per tile).")
 def denoise_cmd(inputs, output, frames, model, device, threads, kind, maps, preset, motion_units, fps, shutter,
                 motion_y, keep_noisy, tile, halo, max_memory, cache_dir, skip_existing, shard, strict, window, aovs,
-                reference, parts, flow, flow_direction, flow_channels):
+                reference, parts, flow, flow_direction, flow_channels, profile):
     """Denoise deep EXR INPUTS (files or patterns such as beauty.####.exr) into deep EXRs with the same pixels,
     bins, bin order, channels, ids and header: diffuse, specular, alpha and depth are denoised and the beauty
     is rebuilt from them.
@@ -174,7 +179,10 @@ def denoise_cmd(inputs, output, frames, model, device, threads, kind, maps, pres
             warned.append(msg)
             tqdm.write(f"ranad: warning: {msg}", file=sys.stderr)
 
-        summary = denoise_shot(jobs, loaded, opts, fbar.update, _TileBar(tbar), on_frame, sequence, warn)
+        from ranad_core.profile import profiling
+
+        with profiling() if profile else contextlib.nullcontext() as prof:
+            summary = denoise_shot(jobs, loaded, opts, fbar.update, _TileBar(tbar), on_frame, sequence, warn)
     for msg in summary.messages:
         if msg not in warned:
             click.echo(f"ranad: warning: {msg}", err=True)
@@ -184,6 +192,8 @@ def denoise_cmd(inputs, output, frames, model, device, threads, kind, maps, pres
                + (f"; {summary.dropped} neighbour bin(s) carried out of the frame by motion (not used)"
                   if summary.dropped else "")
                + ("; WITHOUT motion compensation (no motion channels)" if summary.no_motion else ""))
+    if profile:
+        click.echo(f"\nprofile ({torch.get_num_threads()} thread(s)):\n{prof.table()}")
     for path, before, after in scores:
         click.echo(f"{os.path.basename(path)}: flattened SMAPE vs reference {before:.4f} -> {after:.4f} "
                    f"({before / max(after, 1e-12):.1f}x closer)")

@@ -19,6 +19,7 @@ channels.
 from __future__ import annotations
 
 import math
+import time
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -27,6 +28,7 @@ import torch
 from .channels import ChannelMap, canonical, detect, layer_values, split_layer
 from .deep import DeepImage, replace_nonfinite, unsort
 from .model.inputs import depth_stats, prepare
+from .profile import record_tile, stage
 
 ALIGN = 16                 # tile origins: multiples of the position encoding's longest period
 BYTES_PER_BIN = 2048       # model working memory per bin at inference (measured ~1.6 KB for cpu-small)
@@ -161,14 +163,15 @@ def _model_frame(img: DeepImage, mapping: ChannelMap, features: str = "log1p") -
     canon, nonfinite = _fix_nonfinite(canon)
     if residual is not None:
         residual = np.nan_to_num(residual, nan=0.0, posinf=0.0, neginf=0.0)
-    srt, perm = canon.sorted()
-    res = residual[perm] if residual is not None else None
-    scale = 1.0
-    if features == "prior":  # whole-frame prior and exposure, before tiling, so tiles agree
-        from .model.prior import frame_scale, with_prior
+    with stage("inputs/sort and prior"):
+        srt, perm = canon.sorted()
+        res = residual[perm] if residual is not None else None
+        scale = 1.0
+        if features == "prior":  # whole-frame prior and exposure, before tiling, so tiles agree
+            from .model.prior import frame_scale, with_prior
 
-        srt = with_prior(srt, res)
-        scale = frame_scale(srt)
+            srt = with_prior(srt, res)
+            scale = frame_scale(srt)
     return _Frame(srt, perm, res, depth_stats(srt), nonfinite, features, scale)
 
 
@@ -212,10 +215,12 @@ def denoise_window(model, images: list, centre: int, mapping: ChannelMap | None 
     img = images[centre]
     mapping = mapping or detect(img)
     if len(images) > 1:
-        moved, dropped = compensate(images, centre, flows=flows, motion=mapping.motion)
+        with stage("motion"):
+            moved, dropped = compensate(images, centre, flows=flows, motion=mapping.motion)
     else:
         moved, dropped = images, 0
-    frames = [_model_frame(m, mapping, model_features(model)) for m in moved]
+    with stage("inputs"):
+        frames = [_model_frame(m, mapping, model_features(model)) for m in moved]
     c = frames[centre]
     n = c.srt.num_bins
     h, w = c.srt.height, c.srt.width
@@ -226,34 +231,45 @@ def denoise_window(model, images: list, centre: int, mapping: ChannelMap | None 
     tiles = 0
     for core, win in tile_windows(w, h, tile, halo):
         tiles += 1
-        parts = [_tile_inputs(fr, win, w) for fr in frames]
-        if parts[centre][1].size:
-            window = [p[0] for p in parts]
-            with torch.inference_mode():
-                # embeddings are rounded to float16, the precision of the AOV cache, before the reconstruction,
-                # so `ranad aov` rebuilds exactly these kernels and light groups sum to this beauty
-                if cross:
-                    feats = [f.half().float() for f in model.embeddings(window, centre)]
-                    pred = model.reconstruct(feats, window, centre)
-                else:
-                    feats = [model.embeddings(window[0]).half().float()]
-                    pred = {k: m(feats[0], window[0].layout, window[0].layers[k]) for k, m in model.recon.items()
-                            if k in window[0].layers}
-            keep = _core_mask(parts[centre][2], win, core)
-            dst = parts[centre][1][keep]
-            for k, v in pred.items():
-                if k not in outs:
-                    outs[k] = np.zeros((n, v.shape[1]), np.float32)
-                outs[k][dst] = v.numpy()[keep]
-            if want_embeddings:
-                for f, (fr, (_, idx, local)) in enumerate(zip(frames, parts)):
-                    if embs[f] is None:
-                        embs[f] = np.zeros((fr.srt.num_bins, feats[f].shape[1]), np.float16)
-                    kf = _core_mask(local, win, core)
-                    embs[f][idx[kf]] = feats[f].numpy()[kf].astype(np.float16)
+        t_tile = time.perf_counter()
+        with stage("tiles"):
+            with stage("tiles/gather"):
+                parts = [_tile_inputs(fr, win, w) for fr in frames]
+            if parts[centre][1].size:
+                window = [p[0] for p in parts]
+                with torch.inference_mode():
+                    # embeddings are rounded to float16, the precision of the AOV cache, before the
+                    # reconstruction, so `ranad aov` rebuilds exactly these kernels and light groups sum to this
+                    # beauty
+                    with stage("tiles/backbone"):
+                        if cross:
+                            feats = [f.half().float() for f in model.embeddings(window, centre)]
+                        else:
+                            feats = [model.embeddings(window[0]).half().float()]
+                    with stage("tiles/reconstruction"):
+                        if cross:
+                            pred = model.reconstruct(feats, window, centre)
+                        else:
+                            pred = {k: m(feats[0], window[0].layout, window[0].layers[k])
+                                    for k, m in model.recon.items() if k in window[0].layers}
+                with stage("tiles/scatter"):
+                    keep = _core_mask(parts[centre][2], win, core)
+                    dst = parts[centre][1][keep]
+                    for k, v in pred.items():
+                        if k not in outs:
+                            outs[k] = np.zeros((n, v.shape[1]), np.float32)
+                        outs[k][dst] = v.numpy()[keep]
+                    if want_embeddings:
+                        for f, (fr, (_, idx, local)) in enumerate(zip(frames, parts)):
+                            if embs[f] is None:
+                                embs[f] = np.zeros((fr.srt.num_bins, feats[f].shape[1]), np.float16)
+                            kf = _core_mask(local, win, core)
+                            embs[f][idx[kf]] = feats[f].numpy()[kf].astype(np.float16)
+                record_tile(sum(int(p[1].size) for p in parts), int(keep.sum()), time.perf_counter() - t_tile)
         if progress:
             progress(1)
-    out = _assemble(img, mapping, c.srt, c.perm, outs, keep_noisy) if n else img
+    with stage("assemble"):
+        out = _assemble(img, mapping, c.srt, c.perm, outs, keep_noisy) if n else img
     if want_embeddings:
         dim = model.config.dim
         embs = [e if e is not None else np.zeros((fr.srt.num_bins, dim), np.float16) for e, fr in zip(embs, frames)]

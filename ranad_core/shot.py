@@ -20,6 +20,7 @@ from . import cache as cache_io
 from .channels import detect, motion_candidates
 from .denoise import ALIGN, choose_tile, denoise_window, halo_for, is_cross_frame, tile_bytes
 from .errors import RanadError
+from .profile import stage
 from .exr import read_deep, read_header, resolve_part, write_parts
 
 
@@ -329,7 +330,8 @@ def denoise_shot(jobs, loaded, opts: ShotOptions, frame_bar=None, tile_bar=None,
             key = part_key(layout, index)
             part = None if not layout.multipart else key
             where = frame.path if not layout.multipart else f"{frame.path} ({part_label(layout, index)})"
-            images = [store.get(f, part) for f in members]
+            with stage("read"):
+                images = [store.get(f, part) for f in members]
             img = images[centre]
             disp = first_display.setdefault(key, (frame.path, img.display_window))
             for f, other in zip(members, images):
@@ -346,17 +348,19 @@ def denoise_shot(jobs, loaded, opts: ShotOptions, frame_bar=None, tile_bar=None,
             replaced[index] = result.image
             if opts.cache_dir:
                 cache = cache_io.cache_path(opts.cache_dir, out, None if len(chosen) == 1 else str(key))
-                cache_io.write_cache(cache, img, result, loaded.model_id, opts.model_spec or "", frame.path,
-                                     frame.frame, result.tile, halo,
-                                     [m.path for m in members] if is_cross_frame(model) else None, opts.overrides,
-                                     part=str(key) if layout.multipart else None)
+                with stage("cache"):
+                    cache_io.write_cache(cache, img, result, loaded.model_id, opts.model_spec or "", frame.path,
+                                         frame.frame, result.tile, halo,
+                                         [m.path for m in members] if is_cross_frame(model) else None,
+                                         opts.overrides, part=str(key) if layout.multipart else None)
             summary.bins += result.bins
             summary.nonfinite += max(result.nonfinite, bad)
             summary.dropped += result.dropped
             if on_frame and not reported:
                 pending = (img, result)
                 reported = True
-        write_parts(out, frame.path, replaced)
+        with stage("write"):
+            write_parts(out, frame.path, replaced)
         summary.frames += 1
         summary.seconds += time.perf_counter() - t0
         if on_frame:
@@ -393,7 +397,8 @@ def _denoise_part(model, images, centre, flows, where, opts, summary, halo, tile
                             opts.cache_dir is not None or bool(opts.aovs), tile_bar, flows)
     result.tile = tile
     if opts.aovs:
-        result.image = with_denoised_aovs(model, images, centre, mapping, result, opts.aovs, where, flows)
+        with stage("aovs"):
+            result.image = with_denoised_aovs(model, images, centre, mapping, result, opts.aovs, where, flows)
     nonfinite = max(result.nonfinite, bad)
     if nonfinite:
         if opts.strict:

@@ -251,3 +251,27 @@ def test_map_finds_renamed_layers(tmp_path, model_file):
     assert not np.array_equal(unmapped.channel("R"), mapped.channel("R"))
     r = run("denoise", tmp_path / "kd.exr", "-o", tmp_path / "bad.exr", "--model", model_file, "--map", "diffuse")
     assert r.exit_code == 2 and "--map" in r.output and not (tmp_path / "bad.exr").exists()
+
+
+def test_profile_reports_every_stage_and_changes_nothing(tmp_path, model_file):
+    """--profile prints seconds per stage whose top-level stages add up to the total, the tile summary matches the
+    tiling (4 tiles of 32 px with a 16-px halo on the 64x64 example), and the output is the same as without it."""
+    plain, profiled = tmp_path / "plain.exr", tmp_path / "profiled.exr"
+    assert run("denoise", FRAME, "-o", plain, "--model", model_file, "--tile", "32", "--halo", "16").exit_code == 0
+    r = run("denoise", FRAME, "-o", profiled, "--model", model_file, "--tile", "32", "--halo", "16", "--profile")
+    assert r.exit_code == 0, r.output
+    np.testing.assert_array_equal(read_deep(plain).values, read_deep(profiled).values)
+    rows = dict(re.findall(r"^\| ([a-z -]+?) \| ([\d.]+) \|", r.output, re.M))
+    for stage in ("read", "inputs", "tiles", "  - backbone", "  - reconstruction", "assemble", "write", "total"):
+        assert stage in rows, (stage, r.output)
+    top = sum(float(v) for k, v in rows.items() if not k.startswith("  - ") and k != "total")
+    assert top == pytest.approx(float(rows["total"]), abs=0.02)
+    parts = sum(float(rows[k]) for k in rows if k.startswith("  - ") and k != "  - sort and prior")
+    assert parts <= float(rows["tiles"]) + 0.02
+    img = read_deep(FRAME)
+    m = re.search(r"(\d+) tile\(s\): (\d+)-(\d+) bins with the halo, ([\d.]+)x", r.output)
+    assert m and int(m.group(1)) == 4
+    counts = np.diff(img.offsets).reshape(img.height, img.width)
+    windows = [counts[max(0, y - 16):y + 48, max(0, x - 16):x + 48].sum() for y in (0, 32) for x in (0, 32)]
+    assert (int(m.group(2)), int(m.group(3))) == (min(windows), max(windows))
+    assert float(m.group(4)) == pytest.approx(sum(windows) / img.num_bins, abs=0.01)

@@ -1,0 +1,87 @@
+"""Where a denoise run's time goes: wall-clock seconds per pipeline stage (`ranad denoise --profile`).
+
+The pipeline marks its stages with `with stage(name):`; nothing is recorded (and the marks cost a global lookup)
+unless a `profiling()` block is active. Stages named "parent/child" are inside their parent and are listed under
+it, not added to the total. Tiles are also recorded one by one (bins, seconds), since the tile size and halo are
+what a user tunes.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import time
+from dataclasses import dataclass, field
+
+STAGES = ("read", "motion", "inputs", "inputs/sort and prior", "tiles", "tiles/gather", "tiles/backbone",
+          "tiles/reconstruction", "tiles/scatter", "assemble", "aovs", "cache", "write")
+
+
+@dataclass
+class Profile:
+    seconds: dict = field(default_factory=dict)
+    calls: dict = field(default_factory=dict)
+    tiles: list = field(default_factory=list)      # (bins in the haloed window, core bins, seconds)
+
+    def add(self, name: str, secs: float) -> None:
+        self.seconds[name] = self.seconds.get(name, 0.0) + secs
+        self.calls[name] = self.calls.get(name, 0) + 1
+
+    def total(self) -> float:
+        return sum(v for k, v in self.seconds.items() if "/" not in k)
+
+    def table(self) -> str:
+        """A markdown table: stage, seconds, share of the total, calls; then the per-tile summary."""
+        total = self.total() or 1e-12
+        order = [s for s in STAGES if s in self.seconds] + sorted(set(self.seconds) - set(STAGES))
+        lines = ["| stage | seconds | share | calls |", "|---|---|---|---|"]
+        for name in order:
+            label = ("  - " + name.split("/", 1)[1]) if "/" in name else name
+            lines.append(f"| {label} | {self.seconds[name]:.2f} | {100 * self.seconds[name] / total:.1f}% | "
+                         f"{self.calls[name]} |")
+        lines.append(f"| total | {self.total():.2f} | 100% | |")
+        if self.tiles:
+            bins = [t[0] for t in self.tiles]
+            core = sum(t[1] for t in self.tiles)
+            secs = [t[2] for t in self.tiles]
+            lines.append("")
+            lines.append(f"{len(self.tiles)} tile(s): {min(bins)}-{max(bins)} bins with the halo, "
+                         f"{sum(bins) / max(core, 1):.2f}x the frame's bins computed (halo overlap); "
+                         f"{min(secs):.2f}-{max(secs):.2f} s per tile, {1e6 * sum(secs) / max(sum(bins), 1):.1f} us "
+                         "per haloed bin")
+        return "\n".join(lines)
+
+
+_active: Profile | None = None
+
+
+@contextlib.contextmanager
+def stage(name: str):
+    """Times the block into the active profile (if any)."""
+    if _active is None:
+        yield
+        return
+    t = time.perf_counter()
+    try:
+        yield
+    finally:
+        _active.add(name, time.perf_counter() - t)
+
+
+def record_tile(bins: int, core_bins: int, seconds: float) -> None:
+    if _active is not None:
+        _active.tiles.append((bins, core_bins, seconds))
+
+
+def active() -> bool:
+    return _active is not None
+
+
+@contextlib.contextmanager
+def profiling():
+    """Activates a fresh Profile for the block and yields it."""
+    global _active
+    previous, _active = _active, Profile()
+    try:
+        yield _active
+    finally:
+        _active = previous
