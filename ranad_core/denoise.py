@@ -78,8 +78,16 @@ def _in_recon(model, module) -> bool:
     return any(module is m for m in core.recon.modules())
 
 
-def halo_for(model) -> int:
+def halo_for_bound(model) -> int:
+    """The receptive-field bound rounded up to ALIGN: a halo that makes tiles exactly equal to the whole frame."""
     return int(math.ceil(receptive_field(model) / ALIGN) * ALIGN)
+
+
+def halo_for(model) -> int:
+    """The default tile halo: the model's measured halo (metadata "halo", halo.py) when it has one, else the
+    receptive-field bound."""
+    measured = getattr(model, "measured_halo", None)
+    return min(int(measured), halo_for_bound(model)) if measured else halo_for_bound(model)
 
 
 def tile_windows(width: int, height: int, tile: int, halo: int):

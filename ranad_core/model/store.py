@@ -115,6 +115,8 @@ def load_model(spec: str | None = None, backend: str = "auto") -> LoadedModel:
     except RuntimeError as e:
         raise RanadError(f"weights do not fit config {config.name!r}: {str(e).splitlines()[0]}", path) from None
     model.eval()
+    if str(meta.get("halo", "")).isdigit():   # measured by `ranad export --measure-halo` (halo.py)
+        model.measured_halo = int(meta["halo"])
     name = path.stem if path.suffix == ".safetensors" else path.parent.name
     return LoadedModel(model, f"{name}@{content_digest(state, meta)}", meta)
 
@@ -127,13 +129,23 @@ def checkpoint_metadata(ckpt: dict) -> dict:
 
 
 def export_weights(checkpoint: str | Path, out: str | Path, extra: dict | None = None) -> Path:
-    """Write a training checkpoint's model weights as safetensors with the config and provenance metadata."""
+    """Write a training checkpoint's model weights as safetensors with the config and provenance metadata; a
+    .safetensors source is copied with its metadata updated by `extra`."""
     from safetensors.torch import save_file
 
-    ckpt = torch.load(resolve(str(checkpoint)), map_location="cpu", weights_only=True)
-    meta = checkpoint_metadata(ckpt)
+    source = resolve(str(checkpoint))
+    if source.suffix == ".safetensors":
+        from safetensors import safe_open
+        from safetensors.torch import load_file
+
+        with safe_open(str(source), framework="pt") as f:
+            meta = dict(f.metadata() or {})
+        state = load_file(str(source))
+    else:
+        ckpt = torch.load(source, map_location="cpu", weights_only=True)
+        meta = checkpoint_metadata(ckpt)
+        state = {k: v.contiguous() for k, v in ckpt["model"].items()}
     meta.update({k: str(v) for k, v in (extra or {}).items()})
-    state = {k: v.contiguous() for k, v in ckpt["model"].items()}
     with atomic_output(out) as tmp:
         save_file(state, tmp, metadata=meta)
     return Path(out)
