@@ -7,6 +7,10 @@ same run measures two baselines on the same frame: reading and writing it withou
 and flat OIDN on the flattened frame (what a flat denoiser costs).
 
 Usage: python bench/denoise.py [--threads 2] [--real ../shared/data/deep-real/LeftView_Trunks.exr] [--model M]
+           [--frame SRC.exr] [--args "--max-memory 4G" --args "--halo 16" ...]
+`--frame` tiles that deep frame to 1920x1080 instead of rendering one (e.g. a held-out 16-spp deep-Z frame of
+`ranad synth --preset glass`); each `--args` adds one more `ranad denoise` run with those options (peak memory
+and time side by side with the default run; `--profile` in them prints the stage table).
 """
 
 from __future__ import annotations
@@ -67,14 +71,17 @@ def tile_to(img: DeepImage, width: int, height: int) -> DeepImage:
     return out
 
 
-def make_1080p(folder: str) -> str:
+def make_1080p(folder: str, source: str | None = None) -> str:
+    path = os.path.join(folder, "frame1080.exr")
+    if source:
+        write_deep(path, tile_to(read_deep(source), 1920, 1080))
+        return path
     from ranad_core.synth import dataset
 
     cfg = dataset.SynthConfig(out=os.path.join(folder, "synth"), scenes=1, size=128, frames=1, spp=(16,),
                               ref_spp=16, seed=7, presets=("deep-heavy",), kinds=("deepz",))
     dataset.run(cfg, 1)
     src = read_deep(os.path.join(folder, "synth", "scene_0000", "deepz", "noisy_spp16.0000.exr"))
-    path = os.path.join(folder, "frame1080.exr")
     write_deep(path, tile_to(src, 1920, 1080))
     return path
 
@@ -87,11 +94,12 @@ OIDN = ("import numpy as np, pyoidn; from ranad_core.exr import read_deep; from 
         "pyoidn.denoise(np.maximum(flat, 0), hdr=True)")
 
 
-def bench(path: str, label: str, folder: str, threads: int, model: str | None) -> None:
+def bench(path: str, label: str, folder: str, threads: int, model: str | None, variants=()) -> None:
     img = read_deep(path)
     out = os.path.join(folder, "out.exr")
     args = [path, "-o", out, "--threads", str(threads)] + (["--model", model] if model else [])
     den = run_measured(DENOISE, *args, threads=threads)
+    others = [(v, run_measured(DENOISE, *args, *v.split(), threads=threads)) for v in variants]
     io = run_measured(IO_ONLY, path, os.path.join(folder, "io.exr"), threads=threads)
     try:
         import pyoidn  # noqa: F401
@@ -107,6 +115,11 @@ def bench(path: str, label: str, folder: str, threads: int, model: str | None) -
         print(f"  flat OIDN         {oidn['seconds']:7.1f} s   peak {oidn['peak_mb']:7.0f} MB   "
               f"(denoise = {den['seconds'] / oidn['seconds']:.1f}x flat OIDN incl. read)")
     print(f"  {1e6 * den['seconds'] / max(img.num_bins, 1):.1f} us per bin end to end")
+    for v, r in others:
+        ratio = f"   ({r['seconds'] / oidn['seconds']:.1f}x flat OIDN)" if oidn else ""
+        print(f"  ranad denoise {v}: {r['seconds']:7.1f} s   peak {r['peak_mb']:7.0f} MB{ratio}")
+        if "| stage |" in r["output"]:
+            print("    " + r["output"][r["output"].index("| stage |"):].strip().replace("\n", "\n    "))
 
 
 def main() -> None:
@@ -115,15 +128,18 @@ def main() -> None:
     ap.add_argument("--real", default=os.path.join(ROOT, "..", "shared", "data", "deep-real", "LeftView_Trunks.exr"))
     ap.add_argument("--model", default=None)
     ap.add_argument("--skip-1080p", action="store_true")
+    ap.add_argument("--frame", default=None, help="a deep frame to tile to 1080p instead of rendering one")
+    ap.add_argument("--args", action="append", default=[], help="options of one more ranad denoise run")
     a = ap.parse_args()
     with tempfile.TemporaryDirectory() as folder:
         if not a.skip_1080p:
             t = time.perf_counter()
-            path = make_1080p(folder)
+            path = make_1080p(folder, a.frame)
             print(f"made the 1080p frame in {time.perf_counter() - t:.1f} s")
-            bench(path, "1080p synth (deep-heavy, 16 spp)", folder, a.threads, a.model)
+            label = f"1080p tiled from {a.frame}" if a.frame else "1080p synth (deep-heavy, 16 spp)"
+            bench(path, label, folder, a.threads, a.model, a.args)
         if a.real and os.path.isfile(a.real):
-            bench(a.real, os.path.basename(a.real), folder, a.threads, a.model)
+            bench(a.real, os.path.basename(a.real), folder, a.threads, a.model, a.args)
 
 
 if __name__ == "__main__":
