@@ -44,12 +44,17 @@ def kernel_cache_bytes() -> float:
 
 
 def frame_working_bytes(images: list, centre: int) -> float:
-    """Bytes a frame's denoising adds to the frames already read, besides the tiles: the centre's canonical and
-    sorted copies, its output and per-layer results (about 3x its values; measured on a 1080p frame of 6.5 M bins
-    x 35 channels), and each neighbour's motion-compensated, sorted copy (about its values)."""
+    """Bytes a frame's denoising adds to the frames already read, besides the tiles. Measured (bench/denoise.py
+    frames, 1920x1080 tiled from held-out 16-spp deep-Z frames, 38 channels; peak less the resident set before and
+    less 1.6 KB per bin of the largest tile window): 2364 MiB at 1.9 M bins (281 MiB of values) and 3227 MiB at
+    4.7 M bins (683 MiB). That fits 1.7x the values + 64 B per bin + 890 B per pixel: the canonical and sorted
+    copies and the output scale with the values, the whole-frame flat prior (OIDN's buffers, the flattened guides)
+    with the pixels. Taken here as 2x the values + 64 B per bin + 900 B per pixel for the centre, and each
+    neighbour's compensated, sorted copy with its own prior images as its values + 64 B per bin + 128 B per pixel."""
     c = images[centre]
-    extra = 3.0 * c.values.nbytes + 64.0 * c.num_bins
-    extra += sum(im.values.nbytes + 64.0 * im.num_bins for i, im in enumerate(images) if i != centre)
+    extra = 2.0 * c.values.nbytes + 64.0 * c.num_bins + 900.0 * c.width * c.height
+    extra += sum(im.values.nbytes + 64.0 * im.num_bins + 128.0 * im.width * im.height
+                 for i, im in enumerate(images) if i != centre)
     return extra
 
 
