@@ -13,7 +13,7 @@ import click
 @click.option("--measure-halo", "halo_frames", multiple=True, type=click.Path(exists=True, dir_okay=False),
               metavar="FRAME",
               help="Deep EXR frames (repeat the option) to measure the model's tile halo on: the smallest halo whose "
-                   "32-px tiles match the whole frame (mean difference 1e-5, worst bin 0.05 of each channel's mean; stored as "
+                   "32-px tiles match the whole frame (relative difference 1e-5 on average, 1% at worst; stored as "
                    "metadata 'halo', the default of `ranad denoise --halo`). Frames unlike the model's users' "
                    "make a halo that is too small for them: measure on several kinds of scene.")
 def export_cmd(run, out, notes, halo_frames):

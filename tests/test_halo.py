@@ -31,8 +31,7 @@ def wide_model():
 
 
 def matches(tiled, whole) -> bool:  # the criterion, computed here independently of halo.mismatch
-    scale = np.maximum(np.abs(whole).mean(0), 1e-6)
-    d = np.abs(tiled.astype(np.float64) - whole) / scale
+    d = np.abs(tiled.astype(np.float64) - whole) / (np.abs(whole) + np.maximum(np.abs(whole).mean(0), 1e-6))
     return d.mean() <= MEAN_TOL and d.max() <= MAX_TOL
 
 
