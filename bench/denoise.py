@@ -99,7 +99,13 @@ def bench(path: str, label: str, folder: str, threads: int, model: str | None, v
     out = os.path.join(folder, "out.exr")
     args = [path, "-o", out, "--threads", str(threads)] + (["--model", model] if model else [])
     den = run_measured(DENOISE, *args, threads=threads)
-    others = [(v, run_measured(DENOISE, *args, *v.split(), threads=threads)) for v in variants]
+    others = []
+    for v in variants:  # a variant may be refused (a --max-memory too small for the frame): its error is the result
+        try:
+            others.append((v, run_measured(DENOISE, *args, *v.split(), threads=threads)))
+        except SystemExit as e:
+            lines = [ln for ln in str(e).splitlines() if "ranad: error:" in ln]
+            others.append((v, {"error": lines[-1].split("ranad: error:", 1)[1].strip() if lines else str(e)[-300:]}))
     io = run_measured(IO_ONLY, path, os.path.join(folder, "io.exr"), threads=threads)
     try:
         import pyoidn  # noqa: F401
@@ -116,6 +122,9 @@ def bench(path: str, label: str, folder: str, threads: int, model: str | None, v
               f"(denoise = {den['seconds'] / oidn['seconds']:.1f}x flat OIDN incl. read)")
     print(f"  {1e6 * den['seconds'] / max(img.num_bins, 1):.1f} us per bin end to end")
     for v, r in others:
+        if "error" in r:
+            print(f"  ranad denoise {v}: refused: {r['error']}")
+            continue
         ratio = f"   ({r['seconds'] / oidn['seconds']:.1f}x flat OIDN)" if oidn else ""
         print(f"  ranad denoise {v}: {r['seconds']:7.1f} s   peak {r['peak_mb']:7.0f} MB{ratio}")
         if "| stage |" in r["output"]:
