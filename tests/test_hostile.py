@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import contextlib
 import os
-import pickle
 import signal
 import struct
 import tracemalloc
@@ -472,12 +471,30 @@ def test_crafted_checkpoint_does_not_run_code(tmp_path):
     run.mkdir()
     torch.save({"model": {}, "model_config": {"name": "x"}, "step": 3, "payload": _RunsCode(marker)},
                run / CHECKPOINT)
-    with pytest.raises(RanadError, match="not a ranad model") as e:
+    with pytest.raises(RanadError, match="not a ranad training checkpoint") as e:
         load_model(str(run / CHECKPOINT))
     assert "\n" not in str(e.value)
-    with pytest.raises(pickle.UnpicklingError):
+    with pytest.raises(RanadError, match="not a ranad training checkpoint.*Unpickling"):
         resume_step(str(run))
     assert not marker.exists()
+    # the CLI verbs that read checkpoints: one line, exit 2, nothing run, nothing written
+    from click.testing import CliRunner
+
+    from ranad_cli.main import cli
+
+    for args in (["export", str(run), "-o", str(tmp_path / "m.safetensors")],
+                 ["train", str(tmp_path), "-o", str(run), "--steps", "5"]):
+        r = CliRunner().invoke(cli, args)
+        assert r.exit_code == 2 and "not a ranad training checkpoint" in r.output, (args, r.output)
+        assert len(r.output.strip().splitlines()) == 1, r.output
+    assert not marker.exists() and not (tmp_path / "m.safetensors").exists()
+    # truncated and foreign files: the same one-line error
+    (run / CHECKPOINT).write_bytes(b"PK\x03\x04 truncated")
+    with pytest.raises(RanadError, match="not a ranad training checkpoint"):
+        resume_step(str(run))
+    torch.save({"weights": torch.zeros(2)}, run / CHECKPOINT)
+    with pytest.raises(RanadError, match=r"no model, model_config, step"):
+        resume_step(str(run))
 
 
 def test_training_checkpoints_load_with_weights_only(tmp_path):

@@ -97,7 +97,7 @@ def load_model(spec: str | None = None, backend: str = "auto") -> LoadedModel:
             state = load_file(str(path))
             config = ModelConfig.from_dict(json.loads(meta["model_config"]))
         else:
-            ckpt = torch.load(path, map_location="cpu", weights_only=True)
+            ckpt = load_checkpoint(path)
             state, config = ckpt["model"], ModelConfig.from_dict(ckpt["model_config"])
             meta = checkpoint_metadata(ckpt)
     except RanadError:
@@ -121,6 +121,23 @@ def load_model(spec: str | None = None, backend: str = "auto") -> LoadedModel:
     return LoadedModel(model, f"{name}@{content_digest(state, meta)}", meta)
 
 
+CHECKPOINT_KEYS = ("model", "model_config", "step")
+
+
+def load_checkpoint(path, keys=CHECKPOINT_KEYS) -> dict:
+    """A training checkpoint (torch.load with weights_only=True: a crafted file runs no code), or a RanadError
+    naming the file when it is not one (truncated, foreign, or without the entries ranad writes)."""
+    try:
+        ckpt = torch.load(path, map_location="cpu", weights_only=True)
+    except Exception as e:  # noqa: BLE001 - unpickling errors, zip errors, truncation: all one message
+        raise RanadError(f"not a ranad training checkpoint ({type(e).__name__}: {str(e).splitlines()[0][:200]})",
+                         str(path)) from None
+    missing = [k for k in keys if not isinstance(ckpt, dict) or k not in ckpt]
+    if missing:
+        raise RanadError(f"not a ranad training checkpoint (no {', '.join(missing)})", str(path))
+    return ckpt
+
+
 def checkpoint_metadata(ckpt: dict) -> dict:
     """The metadata a training checkpoint carries into its exported file (architecture, step, training settings),
     the same whether the checkpoint is exported or loaded directly."""
@@ -138,11 +155,14 @@ def export_weights(checkpoint: str | Path, out: str | Path, extra: dict | None =
         from safetensors import safe_open
         from safetensors.torch import load_file
 
-        with safe_open(str(source), framework="pt") as f:
-            meta = dict(f.metadata() or {})
-        state = load_file(str(source))
+        try:
+            with safe_open(str(source), framework="pt") as f:
+                meta = dict(f.metadata() or {})
+            state = load_file(str(source))
+        except Exception as e:  # noqa: BLE001 - a corrupt file: one line naming it
+            raise RanadError(f"not a ranad model ({type(e).__name__}: {e})", str(source)) from None
     else:
-        ckpt = torch.load(source, map_location="cpu", weights_only=True)
+        ckpt = load_checkpoint(source)
         meta = checkpoint_metadata(ckpt)
         state = {k: v.contiguous() for k, v in ckpt["model"].items()}
     meta.update({k: str(v) for k, v in (extra or {}).items()})

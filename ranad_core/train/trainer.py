@@ -94,7 +94,9 @@ def load_optimizer(opt, saved: dict, model) -> None:
 def resume_step(run: str) -> int:
     """The step a run folder's checkpoint resumes from (0 without one)."""
     ckpt = os.path.join(run, CHECKPOINT)
-    return int(torch.load(ckpt, weights_only=True)["step"]) if os.path.isfile(ckpt) else 0
+    from ..model.store import load_checkpoint
+
+    return int(load_checkpoint(ckpt)["step"]) if os.path.isfile(ckpt) else 0
 
 
 def save_checkpoint(path: str, model, opt, step: int, cfg: TrainConfig, rng: np.random.Generator) -> None:
@@ -264,7 +266,9 @@ def train(cfg: TrainConfig, progress=None) -> dict:
     step = 0
     ckpt = os.path.join(cfg.run, CHECKPOINT)
     if os.path.isfile(ckpt):
-        state = torch.load(ckpt, weights_only=True)
+        from ..model.store import load_checkpoint
+
+        state = load_checkpoint(ckpt, ("model", "model_config", "step", "optimizer"))
         if state["model_config"]["name"] != cfg.config:
             raise RanadError(f"checkpoint is for config {state['model_config']['name']!r}, not {cfg.config!r}", ckpt)
         model.load_state_dict(state["model"])
