@@ -25,7 +25,7 @@ import fnmatch
 import numpy as np
 import torch
 
-from .channels import ChannelMap, canonical
+from .channels import ALIASES, EMISSION, RGB, SPECULAR, ChannelMap, canonical
 from .deep import DeepImage, replace_nonfinite, unsort
 from .errors import RanadError
 from .model.inputs import ModelInputs
@@ -41,16 +41,16 @@ def aov_layers(channels, pattern: str) -> dict:
         if "." not in c:
             continue
         layer, comp = c.rsplit(".", 1)
-        if fnmatch.fnmatchcase(layer, pattern) and comp in ("R", "G", "B"):
+        if fnmatch.fnmatchcase(layer, pattern) and comp in RGB:
             found.setdefault(layer, {})[comp] = c
-    return {k: tuple(v[x] for x in "RGB") for k, v in sorted(found.items()) if len(v) == 3}
+    return {k: tuple(v[x] for x in RGB) for k, v in sorted(found.items()) if len(v) == 3}
 
 
 def kernel_rule(layer: str) -> str:
     low = layer.lower()
-    if any(a.lower() in low for a in ("diffuse", "diff")):
+    if any(a.lower() in low for a in ALIASES["diffuse"]):
         return "diffuse"
-    if any(a.lower() in low for a in ("specular", "spec")):
+    if any(a.lower() in low for a in ALIASES["specular"]):
         return "specular"
     return "colour"
 
@@ -63,10 +63,10 @@ def _values(img: DeepImage, m: ChannelMap, layers: dict, perm: np.ndarray) -> di
     canon, residual = canonical(img, m)
     n = img.num_bins
     beauty = np.stack([img.channel(c) for c in m.beauty], 1).astype(np.float64)
-    get = lambda name: (np.stack([canon.channel(f"{name}.{c}") for c in "RGB"], 1).astype(np.float64)  # noqa: E731
-                        if f"{name}.R" in canon.channels else np.zeros((n, 3)))
-    spec = get("specular") if m.split else np.zeros((n, 3))
-    emit = get("emission")
+    get = lambda names: (np.stack([canon.channel(c) for c in names], 1).astype(np.float64)  # noqa: E731
+                         if names[0] in canon.channels else np.zeros((n, 3)))
+    spec = get(SPECULAR) if m.split else np.zeros((n, 3))
+    emit = get(EMISSION)
     safe = np.where(np.abs(beauty) > 1e-12, beauty, 1.0)
     r_s = np.where(np.abs(beauty) > 1e-12, spec / safe, 0.0)
     r_e = np.where(np.abs(beauty) > 1e-12, emit / safe, 0.0)

@@ -14,8 +14,8 @@ import torch
 
 from .deep import DeepImage, flatten_torch, unsort
 from .errors import RanadError
+from .channels import ALBEDO, ALPHA, NORMAL, RGB
 
-RGB = ("R", "G", "B")
 EPS = 1e-6
 
 
@@ -27,7 +27,7 @@ def _composite(img: DeepImage, names, premultiplied: bool) -> np.ndarray:
 
 def composite_columns(img: DeepImage, cols: np.ndarray, premultiplied: bool) -> np.ndarray:
     """`_composite` of per-bin columns [N, C] given as an array rather than channel names."""
-    a = img.channel("A")[:, None]
+    a = img.channel(ALPHA)[:, None]
     vals = cols if premultiplied else cols * a
     out = flatten_torch(torch.from_numpy(np.concatenate([vals, a], 1).astype(np.float32)),
                         torch.from_numpy(img.offsets), cols.shape[1]).numpy()
@@ -48,10 +48,10 @@ def oidn_flat(noisy: DeepImage) -> np.ndarray:
     shape = lambda x: np.ascontiguousarray(x.reshape(h, w, 3), np.float32)  # noqa: E731
     colour = shape(np.maximum(_composite(srt, RGB, True), 0))
     aux = {}
-    if all(c in noisy.channels for c in ("albedo.R", "albedo.G", "albedo.B")):
-        aux["albedo"] = shape(np.clip(_composite(srt, ["albedo.R", "albedo.G", "albedo.B"], False), 0, 1))
-        if all(c in noisy.channels for c in ("N.X", "N.Y", "N.Z")):
-            aux["normal"] = shape(np.clip(_composite(srt, ["N.X", "N.Y", "N.Z"], False), -1, 1))
+    if all(c in noisy.channels for c in ALBEDO):
+        aux["albedo"] = shape(np.clip(_composite(srt, list(ALBEDO), False), 0, 1))
+        if all(c in noisy.channels for c in NORMAL):
+            aux["normal"] = shape(np.clip(_composite(srt, list(NORMAL), False), -1, 1))
     return np.asarray(pyoidn.denoise(colour, hdr=True, **aux), np.float32)
 
 
@@ -63,10 +63,10 @@ def recolour(noisy: DeepImage, flat: np.ndarray) -> DeepImage:
     cols = [srt.channels.index(c) for c in RGB]
     target = flat.reshape(-1, 3).astype(np.float64)
     comp = _composite(srt, RGB, True).astype(np.float64)
-    alpha_flat = _composite(srt, ["A"], True)[:, 0].astype(np.float64)
+    alpha_flat = _composite(srt, [ALPHA], True)[:, 0].astype(np.float64)
     pix = srt.pixel_index()
     vals = srt.values.copy()
-    a = srt.channel("A").astype(np.float64)
+    a = srt.channel(ALPHA).astype(np.float64)
     for j, c in enumerate(cols):
         f, d = comp[pix, j], target[pix, j]
         by_share = vals[:, c] * np.divide(d, f, out=np.zeros_like(d), where=np.abs(f) > EPS)

@@ -29,6 +29,7 @@ import numpy as np
 from .deep import DeepImage
 from .errors import RanadError
 from .fileutil import atomic_output
+from .channels import DEPTH
 
 FORMAT = "ranad-cache/1"
 SUFFIX = ".ranadcache"
@@ -38,8 +39,8 @@ def layout_fingerprint(img: DeepImage) -> str:
     """SHA-256 (first 16 hex digits) of the bin layout (offsets) and depths (Z): equal for the beauty file and
     AOV files of the same frame, different for any other frame or render."""
     h = hashlib.sha256(np.ascontiguousarray(img.offsets, np.int64).tobytes())
-    if "Z" in img.channels:
-        h.update(np.ascontiguousarray(img.channel("Z"), np.float32).tobytes())
+    if DEPTH in img.channels:
+        h.update(np.ascontiguousarray(img.channel(DEPTH), np.float32).tobytes())
     return h.hexdigest()[:16]
 
 

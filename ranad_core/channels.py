@@ -46,6 +46,17 @@ ALIASES = {
 COMPONENTS = {"rgb": (("R", "G", "B"), ("r", "g", "b")), "xyz": (("X", "Y", "Z"), ("x", "y", "z")),
               "xy": (("X", "Y"), ("x", "y"), ("R", "G"), ("r", "g"), ("u", "v"), ("U", "V"))}
 CANONICAL = {"diffuse": "diffuse", "specular": "specular", "emission": "emission", "albedo": "albedo", "normal": "N"}
+# The canonical channels by name (what `canonical` builds from a file's channels; the model inputs, metrics,
+# baselines, motion and caches read these, never a file's own names).
+RGB = ("R", "G", "B")
+ALPHA, DEPTH, DEPTH_BACK, COVERAGE = "A", "Z", "ZBack", "coverage"
+DEPTHS = (DEPTH, DEPTH_BACK)
+REQUIRED = (*RGB, ALPHA, DEPTH)
+DIFFUSE = tuple(f"diffuse.{c}" for c in RGB)
+SPECULAR = tuple(f"specular.{c}" for c in RGB)
+EMISSION = tuple(f"emission.{c}" for c in RGB)
+ALBEDO = tuple(f"albedo.{c}" for c in RGB)
+NORMAL = ("N.X", "N.Y", "N.Z")
 # Per-bin copies of per-pixel values that ranad itself adds to the canonical image (never read from or written to
 # files): the flat prior (OIDN's denoised flattened beauty of the bin's pixel; `PRIOR_NOAUX` the same without the
 # albedo/normal guides, for training's reduced-mode crops) and the pixel's flattened noisy beauty.
@@ -371,27 +382,27 @@ def canonical(img: DeepImage, m: ChannelMap) -> tuple[DeepImage, np.ndarray | No
     if m.split:
         diffuse, specular = get("diffuse"), get("specular")
         residual = beauty - diffuse - specular - (emission if emission is not None else 0)
-        for i, c in enumerate("RGB"):
-            put(f"diffuse.{c}", diffuse[:, i])
-            put(f"specular.{c}", specular[:, i])
+        for i in range(3):
+            put(DIFFUSE[i], diffuse[:, i])
+            put(SPECULAR[i], specular[:, i])
     else:
         diffuse = beauty - (emission if emission is not None else 0)
-        for i, c in enumerate("RGB"):
-            put(f"diffuse.{c}", diffuse[:, i])
+        for i in range(3):
+            put(DIFFUSE[i], diffuse[:, i])
     if emission is not None:
-        for i, c in enumerate("RGB"):
-            put(f"emission.{c}", emission[:, i])
-    for layer, comps in (("albedo", "RGB"), ("normal", "XYZ")):
+        for i in range(3):
+            put(EMISSION[i], emission[:, i])
+    for layer, canonical_names in (("albedo", ALBEDO), ("normal", NORMAL)):
         data = get(layer) if m.guides else None
         if data is not None:
-            for i, c in enumerate(comps):
-                put(f"{CANONICAL[layer]}.{c}", data[:, i])
-    put("A", img.channel(m.alpha))
-    put("Z", img.channel(m.depth))
+            for i, name in enumerate(canonical_names):
+                put(name, data[:, i])
+    put(ALPHA, img.channel(m.alpha))
+    put(DEPTH, img.channel(m.depth))
     if m.depth_back:
-        put("ZBack", img.channel(m.depth_back))
+        put(DEPTH_BACK, img.channel(m.depth_back))
     if m.coverage:
-        put("coverage", img.channel(m.coverage))
+        put(COVERAGE, img.channel(m.coverage))
     values = np.stack(cols, 1) if cols else np.zeros((img.num_bins, 0), np.float32)
     out = DeepImage(values=values, offsets=img.offsets, channels=names, data_window=img.data_window,
                     display_window=img.display_window)

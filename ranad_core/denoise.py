@@ -25,7 +25,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import torch
 
-from .channels import ChannelMap, canonical, detect, layer_values, split_layer
+from .channels import DEPTH, DEPTH_BACK, DEPTHS, ChannelMap, canonical, detect, layer_values, split_layer
 from .deep import DeepImage, replace_nonfinite, unsort
 from .model.inputs import depth_stats, prepare
 from .profile import record_tile, stage
@@ -144,7 +144,7 @@ def choose_tile(offsets: np.ndarray, width: int, height: int, halo: int, budget_
     return ALIGN
 
 
-def _fix_nonfinite(img: DeepImage, depth=("Z", "ZBack")) -> tuple[DeepImage, int]:
+def _fix_nonfinite(img: DeepImage, depth=DEPTHS) -> tuple[DeepImage, int]:
     """The NaN/Inf policy (deep.replace_nonfinite) on the canonical image the model reads."""
     return replace_nonfinite(img, depth)
 
@@ -315,11 +315,11 @@ def _assemble(img: DeepImage, m: ChannelMap, srt: DeepImage, perm: np.ndarray, o
     if "alpha" in outs:
         write([m.alpha], np.clip(back(outs["alpha"]), 0, 1))
     if "depth" in outs:
-        z_noisy = srt.values[:, srt.channels.index("Z")]
+        z_noisy = srt.values[:, srt.channels.index(DEPTH)]
         z_new = np.maximum(outs["depth"][:, 0], 0)
         write([m.depth], back(z_new)[:, None])
         if m.depth_back:
-            thick = np.maximum(srt.values[:, srt.channels.index("ZBack")] - z_noisy, 0)
+            thick = np.maximum(srt.values[:, srt.channels.index(DEPTH_BACK)] - z_noisy, 0)
             write([m.depth_back], back(z_new + thick)[:, None])
     out = img.with_values(file_vals)
     if keep_noisy:

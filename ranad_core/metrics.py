@@ -23,8 +23,8 @@ import torch
 import torch.nn.functional as F
 
 from .deep import DeepImage
+from .channels import ALPHA, DEPTH, DEPTH_BACK, DEPTHS, RGB
 
-RGB = ("R", "G", "B")
 INSERT_COLOUR = (0.08, 0.25, 0.6)    # premultiplied colour of the inserted layer
 INSERT_ALPHA = 0.5
 RECOLOUR_GAIN = (1.6, 0.8, 0.5)      # applied to the foreground bins
@@ -94,7 +94,7 @@ def flat_scores(ref: np.ndarray, test: np.ndarray) -> dict:
 
 def beauty(img: DeepImage) -> DeepImage:
     """The beauty part used by the edits: R, G, B, A, Z (and ZBack), ids dropped."""
-    names = [c for c in (*RGB, "A", "Z", "ZBack") if c in img.channels]
+    names = [c for c in (*RGB, ALPHA, DEPTH, DEPTH_BACK) if c in img.channels]
     out = img.select(names)
     out.ids = {}
     return out
@@ -117,7 +117,7 @@ def bin_smape(ref: DeepImage, test: DeepImage) -> float:
 
 def split_depth(ref: DeepImage) -> float:
     """The median depth of the reference's bins: the split of the compositing and separation tests."""
-    z = ref.channel("Z")
+    z = ref.channel(DEPTH)
     return float(np.median(z)) if z.size else 0.0
 
 
@@ -126,7 +126,7 @@ def with_depths_of(img: DeepImage, ref: DeepImage) -> DeepImage:
     if not np.array_equal(img.offsets, ref.offsets):
         raise ValueError("the deep scores need the reference's bin layout")
     vals = img.values.copy()
-    for c in ("Z", "ZBack"):
+    for c in DEPTHS:
         if c in img.channels and c in ref.channels:
             vals[:, img.channels.index(c)] = ref.channel(c)
     return img.with_values(vals)
@@ -134,7 +134,7 @@ def with_depths_of(img: DeepImage, ref: DeepImage) -> DeepImage:
 
 def z_rel(ref: DeepImage, test: DeepImage) -> float:
     """Mean relative depth error |Z - Zref| / Zref over the bins."""
-    zr, zt = ref.channel("Z").astype(np.float64), test.channel("Z").astype(np.float64)
+    zr, zt = ref.channel(DEPTH).astype(np.float64), test.channel(DEPTH).astype(np.float64)
     return float(np.mean(np.abs(zt - zr) / np.maximum(np.abs(zr), 1e-6))) if zr.size else 0.0
 
 
@@ -142,7 +142,7 @@ def composite_edit(img: DeepImage, z_split: float) -> np.ndarray:
     """[H, W, 3]: foreground bins (Z < z_split) recoloured, a semi-transparent layer inserted at z_split."""
     b = beauty(img)
     vals = b.values.copy()
-    fg = vals[:, b.channels.index("Z")] < z_split
+    fg = vals[:, b.channels.index(DEPTH)] < z_split
     for i, c in enumerate(RGB):
         vals[fg, b.channels.index(c)] *= RECOLOUR_GAIN[i]
     b = b.with_values(vals)
@@ -150,8 +150,8 @@ def composite_edit(img: DeepImage, z_split: float) -> np.ndarray:
     layer = np.zeros((p, len(b.channels)), np.float32)
     for i, c in enumerate(RGB):
         layer[:, b.channels.index(c)] = INSERT_COLOUR[i]
-    layer[:, b.channels.index("A")] = INSERT_ALPHA
-    for c in ("Z", "ZBack"):
+    layer[:, b.channels.index(ALPHA)] = INSERT_ALPHA
+    for c in DEPTHS:
         if c in b.channels:
             layer[:, b.channels.index(c)] = z_split
     plane = DeepImage(values=layer, offsets=np.arange(p + 1), channels=b.channels, data_window=b.data_window,
@@ -164,7 +164,7 @@ def composite_edit(img: DeepImage, z_split: float) -> np.ndarray:
 def depth_slices(img: DeepImage, z_split: float) -> tuple[np.ndarray, np.ndarray]:
     """([H, W, 3] front, [H, W, 3] back): the bins in front of / behind z_split, each flattened alone."""
     b = beauty(img)
-    z = b.channel("Z")
+    z = b.channel(DEPTH)
     return flat_rgb(b.keep(z < z_split)), flat_rgb(b.keep(z >= z_split))
 
 

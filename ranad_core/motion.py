@@ -31,12 +31,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from .channels import CANONICAL_MOTION, MotionSpec
+from .channels import ALPHA, CANONICAL_MOTION, DEPTH, MotionSpec  # A, Z: required (detect refuses frames without)
 from .deep import DeepImage, gather_bins
 
 PREV, NEXT = "motion_prev", "motion_next"
 FLOW_CHANNELS = (*CANONICAL_MOTION[PREV], *CANONICAL_MOTION[NEXT])
-ALPHA, DEPTH = "A", "Z"               # required channels (channels.detect refuses frames without them)
 MATCH_DEPTH = float(np.log(2.0))      # a carried-back bin only takes the vector of a bin within 2x its depth
 MATCH_RADIUS = 3                      # ... landing within this many pixels of its pixel centre (nearest first)
 FILL_STEPS = 16                       # hole filling of inverted fields: neighbour averaging rounds

@@ -17,7 +17,7 @@ import time
 from dataclasses import dataclass, field
 
 from . import cache as cache_io
-from .channels import detect, motion_candidates
+from .channels import REQUIRED, detect, motion_candidates
 from .denoise import ALIGN, choose_tile, denoise_window, halo_for, is_cross_frame, tile_bytes
 from .errors import RanadError
 from .profile import stage
@@ -56,7 +56,6 @@ class ShotSummary:
     no_motion: bool = False                          # a cross-frame window ran without any motion data
 
 
-REQUIRED = ("R", "G", "B", "A", "Z")
 
 
 def part_label(layout, index: int) -> str:

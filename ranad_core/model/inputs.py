@@ -19,12 +19,12 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-from ..channels import FLAT_NOISY, PRIOR
+from ..channels import ALBEDO, ALPHA, COVERAGE, DEPTH, DIFFUSE, FLAT_NOISY, NORMAL, PRIOR, SPECULAR
 from ..deep import DeepImage
 from .layers import Layout
 
-RADIANCE_LAYERS = ("diffuse", "specular")   # denoised by their own reconstruction modules
-AUX = {"albedo": ("albedo.R", "albedo.G", "albedo.B"), "normal": ("N.X", "N.Y", "N.Z")}
+RADIANCE_LAYERS = {"diffuse": DIFFUSE, "specular": SPECULAR}   # denoised by their own reconstruction modules
+AUX = {"albedo": ALBEDO, "normal": NORMAL}
 PERIODS = (2.0, 4.0, 8.0, 16.0)              # pixel-position encoding
 BIN_FREQS = 3                                # bin-index encoding
 
@@ -70,7 +70,7 @@ def depth_stats(img: DeepImage) -> tuple[float, float]:
     pass the whole frame's statistics, so a bin's features do not depend on the tiling."""
     if img.num_bins == 0:
         return 0.0, 1.0
-    logz = np.log(np.maximum(img.channel("Z").astype(np.float64), 1e-4))
+    logz = np.log(np.maximum(img.channel(DEPTH).astype(np.float64), 1e-4))
     return float(logz.mean()), float(logz.std())
 
 
@@ -85,12 +85,11 @@ def prepare(img: DeepImage, z_stats: tuple[float, float] | None = None, features
     inv = 1.0 / scale if features == "prior" else 1.0
     n = img.values.shape[0]
     layers = {}
-    for name in RADIANCE_LAYERS:
-        names = tuple(f"{name}.{c}" for c in "RGB")
+    for name, names in RADIANCE_LAYERS.items():
         layers[name] = _cols(img, names) if _has(img, names) else np.zeros((n, 3), np.float32)
-    layers["alpha"] = _cols(img, ["A"])
-    layers["depth"] = _cols(img, ["Z"])
-    cov = _cols(img, ["coverage"]) if "coverage" in img.channels else layers["alpha"]
+    layers["alpha"] = _cols(img, [ALPHA])
+    layers["depth"] = _cols(img, [DEPTH])
+    cov = _cols(img, [COVERAGE]) if COVERAGE in img.channels else layers["alpha"]
     mean, std = depth_stats(img) if z_stats is None else z_stats
     zn = ((np.log(np.maximum(layers["depth"], 1e-4)) - mean) / (std + 1e-6)).astype(np.float32)
     aux = [_cols(img, names) if _has(img, names) else np.zeros((n, 3), np.float32) for names in AUX.values()]

@@ -15,24 +15,24 @@
 from __future__ import annotations
 
 import numpy as np
-from ..channels import FLAT_NOISY, PRIOR, PRIOR_NOAUX
+from ..channels import ALBEDO, DIFFUSE, EMISSION, FLAT_NOISY, NORMAL, PRIOR, PRIOR_NOAUX, RGB, SPECULAR
 from ..baselines import composite_columns
 from ..deep import DeepImage
 from ..errors import RanadError
 
 LUMA = np.array([0.2126, 0.7152, 0.0722], np.float64)
-AUX = (("albedo.R", "albedo.G", "albedo.B"), ("N.X", "N.Y", "N.Z"))
+AUX = (ALBEDO, NORMAL)
 
 
 def beauty(img: DeepImage, residual: np.ndarray | None = None) -> np.ndarray:
     """[N, 3] per-bin beauty of a canonical image: diffuse + specular + emission (+ the residual the split leaves
     out); a file in ranad synth's convention may be passed as is (its R, G, B are used)."""
-    if all(c in img.channels for c in ("R", "G", "B")):
-        return np.stack([img.channel(c) for c in "RGB"], 1).astype(np.float32)
+    if all(c in img.channels for c in RGB):
+        return np.stack([img.channel(c) for c in RGB], 1).astype(np.float32)
     out = np.zeros((img.num_bins, 3), np.float32)
-    for layer in ("diffuse", "specular", "emission"):
-        if f"{layer}.R" in img.channels:
-            out += np.stack([img.channel(f"{layer}.{c}") for c in "RGB"], 1)
+    for names in (DIFFUSE, SPECULAR, EMISSION):
+        if names[0] in img.channels:
+            out += np.stack([img.channel(c) for c in names], 1)
     if residual is not None:
         out += residual
     return out

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..channels import PRIOR, PRIOR_NOAUX
+from ..channels import ALBEDO, DIFFUSE, NORMAL, PRIOR, PRIOR_NOAUX, SPECULAR
 from ..deep import DeepImage, gather_bins
 from ..errors import RanadError
 from ..exr import read_deep
@@ -178,10 +178,6 @@ def sorted_pair(noisy: DeepImage, ref: DeepImage) -> tuple:
     return srt, gather_bins(ref, perm, ref.offsets)
 
 
-AUX_LAYERS = ("albedo", "N")
-SPLIT_LAYERS = ("diffuse", "specular")
-
-
 def without_aux(img: DeepImage) -> DeepImage:
     """The image without albedo and normal channels (what many renderers' deep outputs lack); a flat prior it
     carries becomes the one computed without them."""
@@ -190,18 +186,18 @@ def without_aux(img: DeepImage) -> DeepImage:
         for a, b in zip(PRIOR, PRIOR_NOAUX):
             vals[:, img.channels.index(a)] = img.channel(b)
         img = img.with_values(vals)
-    return img.select([c for c in img.channels if c.split(".")[0] not in AUX_LAYERS and c not in PRIOR_NOAUX])
+    return img.select([c for c in img.channels if c not in (*ALBEDO, *NORMAL, *PRIOR_NOAUX)])
 
 
 def merged_split(img: DeepImage) -> DeepImage:
     """diffuse := diffuse + specular, specular channels removed: a file without the split, as the model sees it
     (the whole radiance goes through the diffuse reconstruction)."""
-    if not all(f"{layer}.{c}" in img.channels for layer in SPLIT_LAYERS for c in "RGB"):
+    if not all(c in img.channels for c in (*DIFFUSE, *SPECULAR)):
         return img
     vals = img.values.copy()
-    for c in "RGB":
-        vals[:, img.channels.index(f"diffuse.{c}")] += img.channel(f"specular.{c}")
-    keep = [c for c in img.channels if c.split(".")[0] != "specular"]
+    for d, s in zip(DIFFUSE, SPECULAR):
+        vals[:, img.channels.index(d)] += img.channel(s)
+    keep = [c for c in img.channels if c not in SPECULAR]
     return img.with_values(vals).select(keep)
 
 
