@@ -34,7 +34,9 @@ def flatten_cmd(inputs, output, frames, part, exposure, as_float, assume_tidy, o
     jobs = [(f, output_path(output, f, len(frames_list))) for f in frames_list]
     for _, out in jobs:
         check_writable_target(out)
+    from ranad_core.channels import DEPTHS
     from ranad_core.deep import flatten
+    from ranad_core.errors import RanadError
     from ranad_core.exr import read_deep
     from ranad_core.exr.flat import write_flat
 
@@ -42,8 +44,11 @@ def flatten_cmd(inputs, output, frames, part, exposure, as_float, assume_tidy, o
         if not overwrite and os.path.exists(out):
             continue
         image = read_deep(f.path, part=part)
-        pixels = flatten(image, tidy=not assume_tidy)
-        types = ["float" if as_float or c in ("Z", "ZBack") else "half" for c in image.channels]
+        try:
+            pixels = flatten(image, tidy=not assume_tidy)
+        except RanadError as e:  # a problem of this file's contents (no Z): name the file
+            raise RanadError(e.problem, e.path or f.path) from None
+        types = ["float" if as_float or c in DEPTHS else "half" for c in image.channels]
         write_flat(out, pixels, list(image.channels), data_window=image.data_window,
                    display_window=image.display_window, dtype=types, exposure=exposure)
     if len(jobs) > 1:

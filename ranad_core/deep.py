@@ -161,10 +161,14 @@ class DeepImage:
         """Column indices of the base layer's ``Z`` and ``ZBack`` (``None`` when there is no ``ZBack``).
 
         Only the full names ``Z``/``ZBack`` are depth channels (OpenEXR); ``layer.Z`` is an auxiliary channel.
-        Raises ValueError without ``Z``: depth order, tidying and splitting are undefined then.
+        Raises RanadError (a problem of the file, not of the caller) without ``Z``: depth order, tidying,
+        splitting and compositing are undefined then.
         """
         if "Z" not in self.channels:
-            raise ValueError(f"no Z channel (have {', '.join(self.channels)}): depth order is undefined")
+            from .errors import RanadError
+
+            raise RanadError(f"no Z channel (have {', '.join(self.channels[:12])}"
+                             f"{', ...' if len(self.channels) > 12 else ''}): a deep image needs Z for its depth order")
         return self.channels.index("Z"), (self.channels.index("ZBack") if "ZBack" in self.channels else None)
 
     def sorted(self) -> tuple["DeepImage", np.ndarray]:

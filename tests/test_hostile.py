@@ -517,3 +517,22 @@ def test_training_checkpoints_load_with_weights_only(tmp_path):
     assert resume_step(cfg.run) == 7
     state = torch.load(os.path.join(cfg.run, CHECKPOINT), weights_only=True)
     assert state["rng"] == rng.bit_generator.state
+
+
+def test_deep_file_without_z_is_one_line(tmp_path):
+    """A deep file whose Z channel is missing (fuzz case 8741 of seed 1 renamed it): `flatten` and `denoise` name
+    the file in one line with exit 2; deep.flatten raises ranad's error, not a foreign ValueError."""
+    from ranad_core.deep import DeepImage, flatten
+    from ranad_core.exr import write_deep
+
+    img = DeepImage(values=np.ones((4, 4), np.float32), offsets=np.arange(5), channels=["A", "B", "G", "R"],
+                    data_window=(0, 0, 1, 1))
+    path = str(tmp_path / "noz.exr")
+    write_deep(path, img)
+    with pytest.raises(RanadError, match="no Z channel"):
+        flatten(img)
+    for args in (["flatten", path, "-o", str(tmp_path / "o.exr")], ["denoise", path, "-o", str(tmp_path / "d.exr")]):
+        r = CliRunner().invoke(cli, args)
+        lines = r.output.strip().splitlines()
+        assert r.exit_code == 2 and len(lines) == 1 and lines[0].startswith(f"ranad: error: {path}: "), r.output
+    assert not (tmp_path / "o.exr").exists() and not (tmp_path / "d.exr").exists()
