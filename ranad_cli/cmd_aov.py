@@ -7,7 +7,6 @@ import json
 import os
 
 import click
-import numpy as np
 from tqdm import tqdm
 
 from ranad_core.errors import RanadError
@@ -32,10 +31,8 @@ def aov_cmd(cache, pattern, output, aov_input):
     emission components per bin (see ranad_core/aov.py). Outputs keep the AOV file's layout, channels and header.
     """
     from ranad_core import cache as cache_io
-    from ranad_core.aov import aov_layers, denoise_aovs
-    from ranad_core.channels import detect
-    from ranad_core.deep import replace_nonfinite
-    from ranad_core.exr import read_deep, write_deep
+    from ranad_core.aov import denoise_cached_frame
+    from ranad_core.exr import write_deep
     from ranad_core.exr.sequence import Frame, format_frame, is_pattern, output_path
     from ranad_core.fileutil import check_writable_target
     from ranad_core.model.store import load_model
@@ -79,40 +76,8 @@ def aov_cmd(cache, pattern, output, aov_input):
             if spec not in models:
                 models[spec] = load_model(spec)
             loaded = models[spec]
-            cache_io.check_cache(meta, path, loaded.model_id)
-            window = json.loads(meta["window"])
-            centre = int(meta["centre"])
-            part = meta.get("part") or None          # the part of a multi-part file the cache was made from
-            beauty = [read_deep(p, part=part) for p in window]
-            cache_io.check_cache(meta, path, None, beauty[centre])
-            aov_files = [source_of(meta, None if frame is None else frame - centre + k, p)
-                         for k, p in enumerate(window)]
-            aov_imgs = [read_deep(p, part=part) if p != b else b_img for p, b, b_img in zip(aov_files, window, beauty)]
-            layers = aov_layers(aov_imgs[centre].channels, pattern)
-            if not layers:
-                raise RanadError(f"no AOV layers match {pattern!r} (layers with .R/.G/.B channels)", src)
-            combined = []
-            for p, b_img, a_img in zip(aov_files, beauty, aov_imgs):
-                if a_img is b_img:
-                    combined.append(b_img)
-                    continue
-                if not (a_img.offsets.shape == b_img.offsets.shape and (a_img.offsets == b_img.offsets).all()):
-                    raise RanadError("bin layout differs from the denoised beauty's (another render?)", p)
-                names = [c for chans in layers.values() for c in chans]
-                cols = np.stack([a_img.channel(c) for c in names], 1)
-                keep = [c for c in b_img.channels if c not in names]
-                base = b_img.select(keep)
-                combined.append(base.with_values(np.concatenate([base.values, cols], 1), keep + names))
-            mapping = detect(beauty[centre], json.loads(meta.get("overrides", "{}")), window[centre])
-            k = len(window)
-            result = denoise_aovs(loaded.model, combined, centre, mapping, layers,
-                                  [tensors[f"embeddings.{i}"] for i in range(k)],
-                                  [tensors[f"perm.{i}"] for i in range(k)], [tensors[f"offsets.{i}"] for i in range(k)])
-            target = replace_nonfinite(aov_imgs[centre], mapping.depth_channels())[0]   # the one NaN/Inf policy
-            vals = target.values.copy()
-            for layer, chans in layers.items():
-                for i, c in enumerate(chans):
-                    vals[:, target.channels.index(c)] = result[layer][:, i]
-            write_deep(out, target.with_values(vals))
+            aov_files = [source_of(meta, None if frame is None else frame - int(meta["centre"]) + k, p)
+                         for k, p in enumerate(json.loads(meta["window"]))]
+            write_deep(out, denoise_cached_frame(loaded, path, tensors, meta, pattern, aov_files))
             bar.update(1)
     click.echo(f"denoised {len(jobs)} frame(s) of AOVs matching {pattern!r}")

@@ -127,3 +127,48 @@ def denoise_aovs(model, images: list, centre: int, mapping: ChannelMap, layers: 
     total_out = (torch.cat(denoised["diffuse"], 1) + torch.cat(denoised["specular"], 1) + vals[centre]["pass"])
     out = unsort(total_out.numpy(), perms[centre])
     return {layer: out[:, 3 * i:3 * i + 3] for i, layer in enumerate(layers)}
+
+
+def denoise_cached_frame(loaded, cache_path: str, tensors: dict, meta: dict, pattern: str, aov_files: list):
+    """The AOV file of one cached frame with its layers matching `pattern` denoised by the cached kernels (what
+    `ranad aov` writes). `aov_files`: per window frame, the file holding its AOVs (the beauty itself, or another
+    file with the same bin layout). The cache is checked against the model and the beauty it was made from."""
+    import json
+
+    from . import cache as cache_io
+    from .channels import detect
+    from .exr import read_deep
+
+    cache_io.check_cache(meta, cache_path, loaded.model_id)
+    window = json.loads(meta["window"])
+    centre = int(meta["centre"])
+    part = meta.get("part") or None          # the part of a multi-part file the cache was made from
+    beauty = [read_deep(p, part=part) for p in window]
+    cache_io.check_cache(meta, cache_path, None, beauty[centre])
+    aov_imgs = [read_deep(p, part=part) if p != b else b_img for p, b, b_img in zip(aov_files, window, beauty)]
+    layers = aov_layers(aov_imgs[centre].channels, pattern)
+    if not layers:
+        raise RanadError(f"no AOV layers match {pattern!r} (layers with .R/.G/.B channels)", aov_files[centre])
+    names = [c for chans in layers.values() for c in chans]
+    combined = []
+    for p, b_img, a_img in zip(aov_files, beauty, aov_imgs):
+        if a_img is b_img:
+            combined.append(b_img)
+            continue
+        if not (a_img.offsets.shape == b_img.offsets.shape and (a_img.offsets == b_img.offsets).all()):
+            raise RanadError("bin layout differs from the denoised beauty's (another render?)", p)
+        cols = np.stack([a_img.channel(c) for c in names], 1)
+        keep = [c for c in b_img.channels if c not in names]
+        base = b_img.select(keep)
+        combined.append(base.with_values(np.concatenate([base.values, cols], 1), keep + names))
+    mapping = detect(beauty[centre], json.loads(meta.get("overrides", "{}")), window[centre])
+    k = len(window)
+    result = denoise_aovs(loaded.model, combined, centre, mapping, layers,
+                          [tensors[f"embeddings.{i}"] for i in range(k)],
+                          [tensors[f"perm.{i}"] for i in range(k)], [tensors[f"offsets.{i}"] for i in range(k)])
+    target = replace_nonfinite(aov_imgs[centre], mapping.depth_channels())[0]   # the one NaN/Inf policy
+    vals = target.values.copy()
+    for layer, chans in layers.items():
+        for i, c in enumerate(chans):
+            vals[:, target.channels.index(c)] = result[layer][:, i]
+    return target.with_values(vals)
