@@ -143,10 +143,9 @@ def denoise_cmd(inputs, output, frames, model, device, threads, kind, maps, pres
                        tuple(c.strip() for c in flow_channels.split(",") if c.strip()))
     prescan(frames_list, opts)
     if model is None:  # the cross-frame model whenever frames have neighbours
-        from ranad_core.model.store import default_model
+        from ranad_core.model.store import default_model_for
 
-        numbers = {f.frame for f in sequence if f.frame is not None}
-        model = default_model(any(n + 1 in numbers for n in numbers) and window != 1)
+        model = default_model_for([f.frame for f in sequence], window)
     loaded = load_model(model)
     opts.model_spec, opts.window = model, window or training_window(loaded)
     _, mapping, found, labels = first_frame(frames_list[0].path, opts)
@@ -163,13 +162,9 @@ def denoise_cmd(inputs, output, frames, model, device, threads, kind, maps, pres
         frame, _ = job
         ref_path = format_frame(reference, frame.frame) if frame.frame is not None else reference
         if os.path.isfile(ref_path):
-            from ranad_core import metrics
+            from ranad_core.metrics import reference_improvement
 
-            ref = read_deep(ref_path)
-            flat_ref = metrics.flat_rgb(ref)
-            before = metrics.smape(flat_ref, metrics.flat_rgb(img))
-            after = metrics.smape(flat_ref, metrics.flat_rgb(result.image))
-            scores.append((frame.path, before, after))
+            scores.append((frame.path, *reference_improvement(img, result.image, read_deep(ref_path))))
 
     with tqdm(total=len(jobs), desc="frames", unit="frame", disable=len(jobs) <= 1, position=0) as fbar, \
             tqdm(desc="tiles", unit="tile", leave=False, position=1) as tbar:

@@ -192,3 +192,10 @@ def temporal_error(outputs: list, references: list) -> float:
         dr = tonemap(references[t + 1]).astype(np.float64) - tonemap(references[t])
         errs.append(np.abs(do - dr).mean())
     return float(np.mean(errs))
+
+
+def reference_improvement(noisy: DeepImage, denoised: DeepImage, reference: DeepImage) -> tuple[float, float]:
+    """(SMAPE of the flattened noisy frame, of the flattened denoised frame) against the flattened reference:
+    what `ranad denoise --reference` reports per frame."""
+    flat_ref = flat_rgb(reference)
+    return smape(flat_ref, flat_rgb(noisy)), smape(flat_ref, flat_rgb(denoised))

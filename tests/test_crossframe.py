@@ -303,3 +303,16 @@ def test_temporal_eval_compares_single_and_cross_frame(tmp_path):
     r = CliRunner().invoke(cli, ["eval", str(SHOT.parent), "-o", str(out), "--temporal", "--model", paths["single"],
                                  "--cross-model", paths["cross"]])
     assert r.exit_code == 2
+
+
+def test_default_model_follows_the_shot():
+    """Without --model: the cross-frame model when some frames are consecutive (and --window is not 1), else the
+    single-frame one (one frame, frames without numbers, or numbers with gaps only)."""
+    from ranad_core.model.store import DEFAULT_CROSS_MODEL, DEFAULT_MODEL, default_model_for
+
+    assert default_model_for([1, 2, 3], None) == DEFAULT_CROSS_MODEL
+    assert default_model_for([10, 12, 13], 5) == DEFAULT_CROSS_MODEL
+    assert default_model_for([1, 2, 3], 1) == DEFAULT_MODEL
+    assert default_model_for([1, 3, 5], None) == DEFAULT_MODEL
+    assert default_model_for([None], None) == DEFAULT_MODEL
+    assert default_model_for([7], None) == DEFAULT_MODEL

@@ -35,6 +35,13 @@ def default_model(sequence: bool) -> str:
     return DEFAULT_MODEL
 
 
+def default_model_for(frame_numbers, window: int | None) -> str:
+    """default_model for a shot: a sequence is frames with at least one consecutive pair of numbers, unless the
+    user asked for windows of one frame (--window 1)."""
+    numbers = {n for n in frame_numbers if n is not None}
+    return default_model(any(n + 1 in numbers for n in numbers) and window != 1)
+
+
 @dataclass
 class LoadedModel:
     model: RaNAD                  # or CrossFrameRaNAD (config.window > 1)
