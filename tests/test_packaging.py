@@ -67,8 +67,14 @@ def test_wheel_builds_and_uses_the_kernels_outside_the_source_tree(tmp_path):
     if not (shutil.which(os.environ.get("CXX", "c++")) or shutil.which("g++")):
         pytest.skip("no C++ compiler on PATH: the kernels cannot be built here")
     wheels = tmp_path / "wheels"
+    (tmp_path / "src").mkdir()
     # build isolation, as `pip install .` does: pyproject.toml's setuptools, not whatever this venv holds
-    build = subprocess.run([sys.executable, "-m", "pip", "wheel", str(ROOT), "--no-deps", "-q", "-w", str(wheels)],
+    src = tmp_path / "src"   # a copy: setuptools builds in the source folder (build/, *.egg-info), not here
+    for name in ("pyproject.toml", "README.md", "ranad_core", "ranad_cli", "cuda"):
+        copy = shutil.copytree if (ROOT / name).is_dir() else shutil.copy2
+        copy(ROOT / name, src / name, **({"ignore": shutil.ignore_patterns("__pycache__")}
+                                         if (ROOT / name).is_dir() else {}))
+    build = subprocess.run([sys.executable, "-m", "pip", "wheel", str(src), "--no-deps", "-q", "-w", str(wheels)],
                            cwd=tmp_path, capture_output=True, text=True)
     assert build.returncode == 0, build.stderr[-3000:]
     (wheel,) = wheels.glob("ranad-*.whl")
