@@ -178,7 +178,7 @@ def _model_frame(img: DeepImage, mapping: ChannelMap, features: str = "log1p") -
         if features == "prior":  # whole-frame prior and exposure, before tiling, so tiles agree
             from .model.prior import frame_scale, with_prior
 
-            srt = with_prior(srt, res)
+            srt = with_prior(srt, res, presorted=True)
             scale = frame_scale(srt)
     return _Frame(srt, perm, res, depth_stats(srt), nonfinite, features, scale)
 

@@ -144,3 +144,19 @@ def test_reduced_mode_crops_read_the_unguided_prior(frame):
     assert "albedo.R" not in red.channels and PRIOR_NOAUX[0] not in red.channels
     np.testing.assert_array_equal(red.channel(PRIOR[1]), img.channel(PRIOR_NOAUX[1]))
     assert not np.array_equal(img.channel(PRIOR[1]), img.channel(PRIOR_NOAUX[1]))
+
+
+def test_prior_of_a_presorted_image_skips_the_sort_and_equals_it():
+    """denoise passes its already sorted canonical image with presorted=True: the same channels and values as
+    sorting it again (the identity permutation), without the sort."""
+    from ranad_core.exr import read_deep
+    from ranad_core.model.prior import with_prior
+
+    img = read_deep(Path(__file__).resolve().parents[1] / "examples" / "synth_shot" / "noisy_spp16.0001.exr")
+    srt, _ = img.sorted()
+    a, b = with_prior(srt), with_prior(srt, presorted=True)
+    assert a.channels == b.channels
+    np.testing.assert_array_equal(a.values, b.values)
+    shuffled = with_prior(img)                       # any bin order: the prior follows each bin
+    _, perm = img.sorted()
+    np.testing.assert_array_equal(shuffled.values[perm], a.values)
