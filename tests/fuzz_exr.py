@@ -532,6 +532,9 @@ def worker(mem_limit_mb: int, as_limit_mb: int) -> None:
             status, detail = "ok", ""
             try:
                 flatten(img)
+            except RanadError as e:  # a problem of the file (e.g. no Z channel: no depth order), told in one line
+                status, detail = ("ranad", str(e)[:300]) if "\n" not in str(e) else \
+                    ("foreign", "multi-line RanadError: " + str(e)[:300])
             except Exception as e:  # noqa: BLE001
                 status, detail = "foreign", f"{type(e).__name__}: {str(e)[:200]}"
             results.append({"target": "flatten", "status": status, "detail": detail,
