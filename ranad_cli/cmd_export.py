@@ -34,9 +34,9 @@ def export_cmd(run, out, notes, halo_frames):
 
         model = load_model(run).model
         images = [read_deep(f) for f in halo_frames]
-        halo, tried = measure_halo(model, images,
-                                   progress=lambda h, m, w: click.echo(f"halo {h:3d} px: mismatch mean {m:.1e}, "
-                                                                       f"worst bin {w:.1e}", err=True))
+        halo, _ = measure_halo(model, images,
+                               progress=lambda h, m, w: click.echo(f"halo {h:3d} px: mismatch mean {m:.1e}, "
+                                                                   f"worst bin {w:.1e}", err=True))
         extra["halo"] = str(halo)
         extra["halo_measured_on"] = ", ".join(str(f) for f in halo_frames)
         click.echo(f"measured halo: {halo} px (the receptive-field bound: {halo_for_bound(model)} px)")

@@ -72,10 +72,6 @@ def record_tile(bins: int, core_bins: int, seconds: float) -> None:
         _active.tiles.append((bins, core_bins, seconds))
 
 
-def active() -> bool:
-    return _active is not None
-
-
 @contextlib.contextmanager
 def profiling():
     """Activates a fresh Profile for the block and yields it."""

@@ -56,8 +56,6 @@ class ShotSummary:
     no_motion: bool = False                          # a cross-frame window ran without any motion data
 
 
-
-
 def part_label(layout, index: int) -> str:
     """How messages name a part: 'part 1 'rgba.right'' (or 'part 1')."""
     name = layout.parts[index].name

@@ -85,7 +85,9 @@ def with_prior(img: DeepImage, residual: np.ndarray | None = None, both: bool = 
     `presorted`: the caller's image is already in depth order (DeepImage.sorted), so neither the sort (3 s at 4.7 M
     bins) nor the way back is needed; the result is the same."""
     srt, perm = (img, None) if presorted else img.sorted()
-    rgb = beauty(img, residual) if perm is None else beauty(img, residual)[perm]
+    rgb = beauty(img, residual)
+    if perm is not None:
+        rgb = rgb[perm]
     pix = srt.pixel_index()
     flat, den = flat_images(srt, rgb, guides=True)
     cols = [den[pix], flat[pix]]

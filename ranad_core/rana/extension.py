@@ -22,7 +22,6 @@ from functools import lru_cache
 from pathlib import Path
 
 
-
 def _source_dir() -> Path:
     packaged = Path(__file__).resolve().parents[1] / "kernels"
     return packaged if (packaged / "rana_math.h").is_file() else Path(__file__).resolve().parents[2] / "cuda"

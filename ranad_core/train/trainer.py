@@ -118,9 +118,8 @@ def freeze_spatial(model, cfg: TrainConfig) -> None:
     reconstruction) stops learning: only T-Mix, the temporal step and their gates train. The model then starts as
     the single-frame one and can only add what the neighbours bring, instead of drifting away from a spatial
     denoiser trained on many more scenes than the few shots a cross-frame run sees."""
-    if not cfg.freeze_spatial:
+    if not cfg.freeze_spatial:    # train() has checked the options (check_freeze) before building it
         return
-    check_freeze(cfg, model.config)
     for name, p in model.named_parameters():
         if name.startswith("single."):
             p.requires_grad_(False)
