@@ -65,12 +65,19 @@ def receptive_field(model) -> int:
     from .model.layers import MultiHeadRaNA
 
     core = model.single if is_cross_frame(model) else model
-    rf = sum(m.radius for m in model.modules() if isinstance(m, MultiHeadRaNA) and not _in_recon(model, m))
+    rf = sum(m.radius for m in core.modules() if isinstance(m, MultiHeadRaNA) and not _in_recon(model, m))
     rec = max((sum(d.radius for d in r.down) + max(p.radius for p in r.per_scale) for r in core.recon.values()),
               default=0.0)
-    if is_cross_frame(model):  # the temporal step before the spatial reconstruction, and the output mix after it
-        rec += model.config.temporal_radius * (2 if getattr(model.config, "output_mix", False) else 1)
-    return int(math.ceil(rf + rec))
+    return int(math.ceil(rf + rec + temporal_reach(model)))
+
+
+def temporal_reach(model) -> float:
+    """The part of a cross-frame model's reach that a window of one frame skips: the T-Mix blocks' radii, the
+    temporal step before the spatial reconstruction and the output mix after it (0 for a single-frame model)."""
+    if not is_cross_frame(model):
+        return 0.0
+    return sum(t.attn.radius for t in model.tmix) \
+        + model.config.temporal_radius * (2 if getattr(model.config, "output_mix", False) else 1)
 
 
 def _in_recon(model, module) -> bool:

@@ -38,14 +38,11 @@ def mismatch(tiled: np.ndarray, whole: np.ndarray) -> tuple[float, float]:
 
 def measure_halo(model, images: list, tile: int = 32, progress=None) -> tuple[int, list]:
     """(the smallest halo that matches on every image, [(halo, worst mean mismatch, worst bin)] per halo tried)."""
-    from .denoise import ALIGN, denoise_frame, halo_for_bound, is_cross_frame
+    from .denoise import ALIGN, denoise_frame, halo_for_bound, temporal_reach
 
     bound = halo_for_bound(model)
     wholes = [denoise_frame(model, img).image.values for img in images]
-    extra = 0.0
-    if is_cross_frame(model):  # what a single-frame window skips: the T-Mix blocks and the temporal kernel steps
-        extra = sum(t.attn.radius for t in model.tmix) \
-            + model.config.temporal_radius * (2 if getattr(model.config, "output_mix", False) else 1)
+    extra = temporal_reach(model)   # what the single-frame windows measured here skip
     tried = []
     for halo in range(ALIGN, bound + 1, ALIGN):
         found = [mismatch(denoise_frame(model, img, tile=tile, halo=halo).image.values, whole)
