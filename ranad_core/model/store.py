@@ -94,22 +94,10 @@ def resolve(spec: str | None) -> Path:
 def load_model(spec: str | None = None, backend: str = "auto") -> LoadedModel:
     """The model in eval mode, with its id and metadata."""
     path = resolve(spec)
+    state, meta = read_weights(path)
     try:
-        if path.suffix == ".safetensors":
-            from safetensors import safe_open
-            from safetensors.torch import load_file
-
-            with safe_open(str(path), framework="pt") as f:
-                meta = dict(f.metadata() or {})
-            state = load_file(str(path))
-            config = ModelConfig.from_dict(json.loads(meta["model_config"]))
-        else:
-            ckpt = load_checkpoint(path)
-            state, config = ckpt["model"], ModelConfig.from_dict(ckpt["model_config"])
-            meta = checkpoint_metadata(ckpt)
-    except RanadError:
-        raise
-    except Exception as e:  # corrupt or foreign files: one line naming the file
+        config = ModelConfig.from_dict(json.loads(meta["model_config"]))
+    except Exception as e:  # foreign metadata: one line naming the file
         raise RanadError(f"not a ranad model ({type(e).__name__}: {e})", path) from None
     if config.window > 1:
         from .crossframe import CrossFrameRaNAD
@@ -126,6 +114,23 @@ def load_model(spec: str | None = None, backend: str = "auto") -> LoadedModel:
         model.measured_halo = int(meta["halo"])
     name = path.stem if path.suffix == ".safetensors" else path.parent.name
     return LoadedModel(model, f"{name}@{content_digest(state, meta)}", meta)
+
+
+def read_weights(path: Path) -> tuple[dict, dict]:
+    """(tensors, metadata) of a .safetensors model or a training checkpoint (its metadata as an export would
+    write it); a RanadError naming the file when it is neither."""
+    if path.suffix != ".safetensors":
+        ckpt = load_checkpoint(path)
+        return ckpt["model"], checkpoint_metadata(ckpt)
+    from safetensors import safe_open
+    from safetensors.torch import load_file
+
+    try:
+        with safe_open(str(path), framework="pt") as f:
+            meta = dict(f.metadata() or {})
+        return load_file(str(path)), meta
+    except Exception as e:  # noqa: BLE001 - corrupt or foreign files: one line naming the file
+        raise RanadError(f"not a ranad model ({type(e).__name__}: {e})", path) from None
 
 
 CHECKPOINT_KEYS = ("model", "model_config", "step")
@@ -157,21 +162,8 @@ def export_weights(checkpoint: str | Path, out: str | Path, extra: dict | None =
     .safetensors source is copied with its metadata updated by `extra`."""
     from safetensors.torch import save_file
 
-    source = resolve(str(checkpoint))
-    if source.suffix == ".safetensors":
-        from safetensors import safe_open
-        from safetensors.torch import load_file
-
-        try:
-            with safe_open(str(source), framework="pt") as f:
-                meta = dict(f.metadata() or {})
-            state = load_file(str(source))
-        except Exception as e:  # noqa: BLE001 - a corrupt file: one line naming it
-            raise RanadError(f"not a ranad model ({type(e).__name__}: {e})", str(source)) from None
-    else:
-        ckpt = load_checkpoint(source)
-        meta = checkpoint_metadata(ckpt)
-        state = {k: v.contiguous() for k, v in ckpt["model"].items()}
+    state, meta = read_weights(resolve(str(checkpoint)))
+    state = {k: v.contiguous() for k, v in state.items()}
     meta.update({k: str(v) for k, v in (extra or {}).items()})
     with atomic_output(out) as tmp:
         save_file(state, tmp, metadata=meta)
