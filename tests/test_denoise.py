@@ -25,12 +25,13 @@ SHOT = Path(__file__).resolve().parents[1] / "examples" / "synth_shot"
 FRAME = SHOT / "noisy_spp16.0001.exr"
 
 
-def tiny_model():
-    """A small untrained model (receptive field 13 px, halo 16), so tiling a 48x48 frame is a real test."""
-    torch.manual_seed(0)
-    rc = ReconConfig(scales=2, heads=2, head_dim=8, radius=1.5, radius_growth=0.5)
-    cfg = ModelConfig("tiny", dim=16, unets=1, levels=1, blocks_per_level=1, heads=4, head_dim=8, radius=1.5,
-                      radius_growth=0.5, recon={"diffuse": rc, "specular": rc, "alpha": rc, "depth": rc})
+def tiny_model(radius=1.5, growth=0.5, heads=4, seed=0, name="tiny"):
+    """A small untrained model (by default receptive field 13 px, halo 16, so tiling a 48x48 frame is a real
+    test); wider radii give a wider receptive field."""
+    torch.manual_seed(seed)
+    rc = ReconConfig(scales=2, heads=2, head_dim=8, radius=radius, radius_growth=growth)
+    cfg = ModelConfig(name, dim=16, unets=1, levels=1, blocks_per_level=1, heads=heads, head_dim=8, radius=radius,
+                      radius_growth=growth, recon={"diffuse": rc, "specular": rc, "alpha": rc, "depth": rc})
     return RaNAD(cfg, feature_dim()).eval()
 
 

@@ -14,20 +14,15 @@ from ranad_cli.main import cli
 from ranad_core.denoise import denoise_frame, halo_for, halo_for_bound
 from ranad_core.exr import read_deep
 from ranad_core.halo import MAX_TOL, MEAN_TOL, measure_halo
-from ranad_core.model import ModelConfig, RaNAD, ReconConfig
-from ranad_core.model.inputs import feature_dim
 from ranad_core.model.store import load_model
+from test_denoise import tiny_model
 
 FRAME = Path(__file__).resolve().parents[1] / "examples" / "synth_shot" / "noisy_spp16.0001.exr"
 
 
 def wide_model():
     """An untrained model whose receptive-field bound (>= 32 px) is wider than one ALIGN step."""
-    torch.manual_seed(1)
-    rc = ReconConfig(scales=2, heads=2, head_dim=8, radius=2.5, radius_growth=1.0)
-    cfg = ModelConfig("wide", dim=16, unets=1, levels=1, blocks_per_level=1, heads=2, head_dim=8, radius=2.5,
-                      radius_growth=1.0, recon={"diffuse": rc, "specular": rc, "alpha": rc, "depth": rc})
-    return RaNAD(cfg, feature_dim()).eval()
+    return tiny_model(radius=2.5, growth=1.0, heads=2, seed=1, name="wide")
 
 
 def matches(tiled, whole) -> bool:  # the criterion, computed here independently of halo.mismatch
