@@ -5,6 +5,21 @@ from __future__ import annotations
 import click
 from tqdm import tqdm
 
+from ranad_core.train.weights import WEIGHTS
+
+
+def _loss_weight(text: str) -> tuple[str, float]:
+    """'TERM=W' -> (TERM, W), or a usage error naming the known terms."""
+    name, _, value = text.partition("=")
+    try:
+        weight = float(value)
+    except ValueError:
+        weight = -1.0
+    if name not in WEIGHTS or not weight >= 0:
+        raise click.BadParameter(f"{text!r}: expected TERM=W with W >= 0 and TERM one of {', '.join(WEIGHTS)}",
+                                 param_hint="--loss-weight")
+    return name, weight
+
 
 @click.command("train")
 @click.argument("datasets", nargs=-1, required=True, type=click.Path(file_okay=False))
@@ -40,8 +55,12 @@ from tqdm import tqdm
 @click.option("--freeze-spatial", is_flag=True,
               help="Cross-frame configs with --init: train only the temporal parts (T-Mix, the temporal kernel "
                    "step and its gate); the single-frame model's weights stay as they are.")
+@click.option("--loss-weight", "loss_weights", multiple=True, metavar="TERM=W",
+              help="Override a loss term's weight (repeatable). Terms and defaults: " + ", ".join(
+                  f"{k}={v:g}" for k, v in WEIGHTS.items()) + ". 'separation' compares the composites of the bins in "
+                  "front of and behind the crop's median depth, each alone (what a holdout sees).")
 def train_cmd(datasets, run, config, steps, crop, lr, seed, checkpoint_every, processes, p_no_aux, p_no_split, window,
-              init, temporal_weight, until, freeze_spatial):
+              init, temporal_weight, until, freeze_spatial, loss_weights):
     """Train on DATASETS (one or several outputs of `ranad synth`, their scenes pooled): centre-frame pairs,
     random crops, flips and transposes, SMAPE on the diffuse and specular bins and on the composited colour plus
     SSIM on it, L1 on alpha and depth. Resumes from RUN/checkpoint.pt when it exists."""
@@ -52,11 +71,12 @@ def train_cmd(datasets, run, config, steps, crop, lr, seed, checkpoint_every, pr
         get_config(config)
     except ValueError as e:
         raise click.BadParameter(str(e), param_hint="--config") from None
+    weights = tuple(_loss_weight(text) for text in loss_weights)
     cfg = TrainConfig(dataset=datasets[0] if len(datasets) == 1 else tuple(datasets), run=run, config=config,
                       steps=steps, crop=crop, lr=lr, seed=seed,
                       checkpoint_every=checkpoint_every, p_no_aux=p_no_aux, p_no_split=p_no_split,
                       window=window, init=init, temporal_weight=temporal_weight, until=until,
-                      freeze_spatial=freeze_spatial)
+                      freeze_spatial=freeze_spatial, loss_weights=weights)
     if processes > 1:
         spawn_local(cfg, processes)
         click.echo(f"done: {steps} steps x {processes} processes, log in {run}/train.log")

@@ -322,3 +322,40 @@ def test_freeze_spatial_trains_only_the_temporal_parts(tmp_path):
                                      "--freeze-spatial", *extra])
         assert r.exit_code == 2 and msg in r.output, r.output
         assert not (tmp_path / "bad").exists()
+
+
+def test_separation_loss_sees_colour_moved_between_depth_layers():
+    """One pixel, a transparent front bin (alpha 0) and an opaque back bin: moving the colour from one bin to the
+    other leaves the flattened colour as it was (the composite loss sees nothing) but puts it on the wrong side of
+    a holdout, which the separation term measures. Written out here: the front composite is the front bin's
+    colour, the back composite the back bin's, each against the reference's."""
+    from ranad_core.train.losses import composite, separation, smape, total_loss
+
+    offsets = torch.tensor([0, 2])
+    ref = {"diffuse": torch.tensor([[0.0, 0.0, 0.0], [0.6, 0.4, 0.2]]), "specular": torch.zeros(2, 3),
+           "alpha": torch.tensor([[0.0], [1.0]]), "depth": torch.tensor([[1.0], [3.0]])}
+    moved = {**ref, "diffuse": ref["diffuse"].flip(0)}
+    assert torch.allclose(composite(moved, offsets), composite(ref, offsets))
+    assert separation(ref, ref, offsets).item() == 0
+    zero, colour = torch.zeros(1, 3), ref["diffuse"][1:]
+    expected = (smape(colour, zero) + smape(zero, colour)) / 2
+    assert separation(moved, ref, offsets).item() == pytest.approx(expected.item(), rel=1e-6) and expected > 0.5
+    _, off = total_loss(moved, ref, offsets, (1, 1))
+    _, on = total_loss(moved, ref, offsets, (1, 1), weights={"separation": 1.0})
+    assert "separation" not in off and on["separation"] == pytest.approx(expected.item(), rel=1e-6)
+    assert on["composite"] == off["composite"] == pytest.approx(0, abs=1e-7)
+
+
+def test_loss_weights_from_the_command_line(tmp_path):
+    """--loss-weight reaches the loss (the log shows the term) and is kept in the checkpoint's train_config;
+    an unknown term or a negative weight is a usage error."""
+    ds = dataset_from_example(tmp_path / "ds")
+    run = tmp_path / "run"
+    r = CliRunner().invoke(cli, ["train", str(ds), "-o", str(run), "--steps", "2", "--crop", "16",
+                                 "--loss-weight", "separation=1", "--loss-weight", "alpha=2"])
+    assert r.exit_code == 0, r.output
+    state = torch.load(run / "checkpoint.pt", weights_only=False)
+    assert dict(state["train_config"]["loss_weights"]) == {"separation": 1.0, "alpha": 2.0}
+    for bad in ("smoothness=1", "alpha=-1", "alpha"):
+        r = CliRunner().invoke(cli, ["train", str(ds), "-o", str(tmp_path / "r2"), "--loss-weight", bad])
+        assert r.exit_code == 2 and "--loss-weight" in r.output and "TERM=W" in r.output

@@ -1,6 +1,8 @@
 """Losses (paper Sec. 5): SMAPE on the bins of each radiance layer; on the composited (flattened) colour, SMAPE
 plus an SSIM term on the tone-mapped image (structure the per-pixel terms miss: blotches, lost edges); L1 on
-alpha and relative L1 on depth. For cross-frame training on consecutive frames, a temporal term: L1 between the
+alpha and relative L1 on depth; optionally (weight 0 by default) a depth-separation term: SMAPE of the
+composites of the bins in front of and behind the crop's median reference depth, each flattened alone, which is
+what a compositor's holdout or insertion sees (colour moved between depth layers, wrong alpha). For cross-frame training on consecutive frames, a temporal term: L1 between the
 change of the tone-mapped composite from one frame to the next and the reference's change (the flicker that
 `ranad eval --temporal` measures)."""
 
@@ -10,8 +12,8 @@ import torch
 
 from ..deep import flatten_torch
 from ..metrics import ssim, tonemap
+from .weights import WEIGHTS
 
-WEIGHTS = {"diffuse": 1.0, "specular": 1.0, "composite": 1.0, "composite_ssim": 0.5, "alpha": 0.5, "depth": 0.2}
 
 
 def smape(pred: torch.Tensor, target: torch.Tensor, eps: float = 1e-2) -> torch.Tensor:
@@ -25,20 +27,40 @@ def composite(layers: dict, offsets: torch.Tensor) -> torch.Tensor:
     return flatten_torch(values, offsets, 3)[:, :3]
 
 
+def separation(pred: dict, ref: dict, offsets: torch.Tensor) -> torch.Tensor:
+    """Mean SMAPE of the front and back composites (bins with reference depth below / from the median reference
+    depth of the crop, each flattened alone; the split follows the reference so both sides hold the same bins)."""
+    z = ref["depth"][:, 0]
+    zs = z.sort().values
+    split = (zs[(len(zs) - 1) // 2] + zs[len(zs) // 2]) / 2   # the median as metrics.split_depth takes it
+    front = (z < split).to(z.dtype)[:, None]
+    return sum(smape(composite(_masked(pred, m), offsets), composite(_masked(ref, m), offsets))
+               for m in (front, 1 - front)) / 2
+
+
+def _masked(layers: dict, mask: torch.Tensor) -> dict:
+    """The colour and alpha layers with the bins outside `mask` made empty (transparent black)."""
+    return {k: layers[k] * mask for k in ("diffuse", "specular", "alpha")}
+
+
 def total_loss(pred: dict, ref: dict, offsets: torch.Tensor, size: tuple[int, int],
-               scale: float = 1.0) -> tuple[torch.Tensor, dict]:
+               scale: float = 1.0, weights: dict | None = None) -> tuple[torch.Tensor, dict]:
     """`scale`: the frame's exposure scale; the SSIM term tone-maps the composite divided by it (so the loss, like
-    the other terms, does not depend on the render's brightness)."""
+    the other terms, does not depend on the render's brightness). `weights`: overrides of WEIGHTS by name; terms
+    of weight 0 are not computed."""
+    weights = {**WEIGHTS, **(weights or {})}
     h, w = size
     parts = {"diffuse": smape(pred["diffuse"], ref["diffuse"]), "specular": smape(pred["specular"], ref["specular"]),
              "alpha": (pred["alpha"] - ref["alpha"]).abs().mean(),
              "depth": ((pred["depth"] - ref["depth"]).abs() / (ref["depth"].abs() + 1e-3)).mean()}
+    if weights["separation"] > 0:
+        parts["separation"] = separation(pred, ref, offsets)
     cp, cr = composite(pred, offsets), composite(ref, offsets)
     parts["composite"] = smape(cp, cr)
     if h >= 4 and w >= 4:
         img = lambda x: tonemap(x / scale).T.reshape(3, h, w)  # noqa: E731
         parts["composite_ssim"] = 1 - ssim(img(cp), img(cr))
-    loss = sum(WEIGHTS[k] * v for k, v in parts.items())
+    loss = sum(weights[k] * v for k, v in parts.items())
     return loss, {k: v.item() for k, v in parts.items()}
 
 

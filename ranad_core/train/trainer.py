@@ -48,6 +48,7 @@ class TrainConfig:
     temporal_weight: float = 0.0  # cross-frame configs: weight of the temporal loss; > 0 trains on consecutive frames
     until: int | None = None      # stop (with a checkpoint) at this step; the schedule still runs to `steps`
     freeze_spatial: bool = False  # cross-frame configs: train only the temporal parts; the single-frame model stays
+    loss_weights: tuple = ()      # (term, weight) pairs overriding weights.WEIGHTS, e.g. (("separation", 1.0),)
 
 
 def learning_rate(cfg: TrainConfig, step: int) -> float:
@@ -196,11 +197,12 @@ def pair_loss(net, pair, rng: np.random.Generator, cfg: TrainConfig, cross: bool
         noisy, ref = prepare(noisy_img, ctx.z_stats, features, ctx.scale), prepare(ref_img)
         if noisy.layout.bins == 0:
             return None
-        return total_loss(net(noisy), ref.layers, noisy.layout.offsets, noisy.layout.size, ctx.scale)
+        return total_loss(net(noisy), ref.layers, noisy.layout.offsets, noisy.layout.size, ctx.scale,
+                          dict(cfg.loss_weights))
     if noisy.layout.bins == 0:
         return None
     pred = net(window, centre)
-    return total_loss(pred, ref.layers, noisy.layout.offsets, noisy.layout.size, scale)
+    return total_loss(pred, ref.layers, noisy.layout.offsets, noisy.layout.size, scale, dict(cfg.loss_weights))
 
 
 def consecutive_loss(net, pairs: tuple, rng: np.random.Generator, cfg: TrainConfig):
@@ -219,7 +221,7 @@ def consecutive_loss(net, pairs: tuple, rng: np.random.Generator, cfg: TrainConf
     for window, centre, ref, scale in inputs:
         preds.append(net(window, centre))
         loss, p = total_loss(preds[-1], ref.layers, window[centre].layout.offsets, window[centre].layout.size,
-                             scale)
+                             scale, dict(cfg.loss_weights))
         losses.append(loss)
         for k, v in p.items():
             parts[k] = parts.get(k, 0.0) + v / len(inputs)
