@@ -34,3 +34,33 @@ def test_fuzz_bounded_run():
     assert summary["read"] > 0 and summary["refused"] > 0, summary  # both outcomes exercised
     assert not failures, "\n".join(json.dumps(f) for f in failures[:20]) + "\n" + json.dumps(summary) + (
         f"\nreproduce: python tests/fuzz_exr.py --seed {SEED} --case N --save case.exr")
+
+
+class _FakeWorker:
+    """Stands in for the worker process: answers "hang" for the first `hangs` runs (over all instances, as a
+    starved or a truly stuck worker would), then reads every case."""
+    runs = 0
+    hangs = 0
+
+    def __init__(self, *args):
+        pass
+
+    def run(self, path, oiio, timeout):
+        type(self).runs += 1
+        if type(self).runs <= type(self).hangs:
+            return "hang", None
+        return "ok", [{"target": "info", "status": "ok", "detail": None, "cpu": 0.0, "peak": 0}]
+
+    def close(self):
+        pass
+
+
+def test_a_timeout_counts_as_a_hang_only_when_it_repeats(monkeypatch):
+    monkeypatch.setattr(fuzz_exr, "Worker", _FakeWorker)
+    _FakeWorker.runs, _FakeWorker.hangs = 0, 1           # starved once: retried, then read
+    summary = fuzz_exr.campaign(3, 1, oiio_every=0)
+    assert summary["hang"] == 0 and summary["hang_retried"] == 1 and summary["read"] == 3
+    _FakeWorker.runs, _FakeWorker.hangs = 0, 2           # stuck in the retry too: a hang
+    summary = fuzz_exr.campaign(3, 1, oiio_every=0)
+    assert summary["hang"] == 1 and summary["hang_retried"] == 0 and summary["read"] == 2
+    assert summary["failures"][0]["case"] == 0 and summary["failures"][0]["status"] == "hang"
