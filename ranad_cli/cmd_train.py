@@ -55,12 +55,16 @@ def _loss_weight(text: str) -> tuple[str, float]:
 @click.option("--freeze-spatial", is_flag=True,
               help="Cross-frame configs with --init: train only the temporal parts (T-Mix, the temporal kernel "
                    "step and its gate); the single-frame model's weights stay as they are.")
+@click.option("--p-misalign", default=0.0, show_default=True, type=click.FloatRange(0, 1),
+              help="Cross-frame configs: share of training windows whose neighbour frames are shifted by 2 to "
+                   "crop/4 pixels, as if their motion vectors were wrong, so the model learns to use a neighbour "
+                   "only where it agrees with the centre frame (refraction, bad vectors, disocclusions).")
 @click.option("--loss-weight", "loss_weights", multiple=True, metavar="TERM=W",
               help="Override a loss term's weight (repeatable). Terms and defaults: " + ", ".join(
                   f"{k}={v:g}" for k, v in WEIGHTS.items()) + ". 'separation' compares the composites of the bins in "
                   "front of and behind the crop's median depth, each alone (what a holdout sees).")
 def train_cmd(datasets, run, config, steps, crop, lr, seed, checkpoint_every, processes, p_no_aux, p_no_split, window,
-              init, temporal_weight, until, freeze_spatial, loss_weights):
+              init, temporal_weight, until, freeze_spatial, p_misalign, loss_weights):
     """Train on DATASETS (one or several outputs of `ranad synth`, their scenes pooled): centre-frame pairs,
     random crops, flips and transposes, SMAPE on the diffuse and specular bins and on the composited colour plus
     SSIM on it, L1 on alpha and depth. Resumes from RUN/checkpoint.pt when it exists."""
@@ -76,7 +80,8 @@ def train_cmd(datasets, run, config, steps, crop, lr, seed, checkpoint_every, pr
                       steps=steps, crop=crop, lr=lr, seed=seed,
                       checkpoint_every=checkpoint_every, p_no_aux=p_no_aux, p_no_split=p_no_split,
                       window=window, init=init, temporal_weight=temporal_weight, until=until,
-                      freeze_spatial=freeze_spatial, loss_weights=weights)
+                      freeze_spatial=freeze_spatial, p_misalign=p_misalign,
+                      loss_weights=weights)
     if processes > 1:
         spawn_local(cfg, processes)
         click.echo(f"done: {steps} steps x {processes} processes, log in {run}/train.log")

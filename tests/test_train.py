@@ -359,3 +359,49 @@ def test_loss_weights_from_the_command_line(tmp_path):
     for bad in ("smoothness=1", "alpha=-1", "alpha"):
         r = CliRunner().invoke(cli, ["train", str(ds), "-o", str(tmp_path / "r2"), "--loss-weight", bad])
         assert r.exit_code == 2 and "--loss-weight" in r.output and "TERM=W" in r.output
+
+
+def test_misaligned_windows_move_only_the_neighbours():
+    """--p-misalign: the centre frame and the reference are cut as without it; each neighbour holds its own
+    content from a window shifted by 2 .. crop/4 pixels, relabelled to the centre's window; at 0 no random numbers
+    are drawn, so earlier runs keep their crops."""
+    from dataclasses import replace
+
+    from deep_factory import random_deep
+    from ranad_core.train.data import cropped, misalignment, random_window, transform
+
+    frames = [random_deep(40, 40, seed=s) for s in (1, 2, 3)]
+    ref = random_deep(40, 40, seed=4)
+    windows = [(frames, ref, 1, None)]
+    r0, r1 = np.random.default_rng(7), np.random.default_rng(7)
+    plain = cropped(windows, r0, 16)[0]
+    off = cropped(windows, r1, 16, p_misalign=0.0)[0]
+    assert r0.random() == r1.random()                       # the same draws with the option at 0
+    for a, b in zip(plain[0] + [plain[1]], off[0] + [off[1]]):
+        assert np.array_equal(a.values, b.values) and np.array_equal(a.offsets, b.offsets)
+    moved = cropped(windows, np.random.default_rng(7), 16, p_misalign=1.0)[0]
+    assert np.array_equal(moved[0][1].values, plain[0][1].values)        # the centre
+    assert np.array_equal(moved[1].values, plain[1].values)              # the reference
+    # the neighbours: the same draws replayed give each one's shift
+    rng = np.random.default_rng(7)
+    win = random_window(ref, rng, 16)
+    fx, fy, tr = (bool(b) for b in rng.integers(0, 2, 3))
+    rng.random()
+    shifts = [misalignment(rng, 16) for _ in frames]
+    for k in (0, 2):
+        dx, dy = shifts[k]
+        assert 2 <= max(abs(dx), abs(dy)) <= 4
+        want = transform(replace(frames[k].crop((win[0] + dx, win[1] + dy, win[2] + dx, win[3] + dy)),
+                                 data_window=win), fx, fy, tr)
+        got = moved[0][k]
+        assert got.data_window == plain[0][k].data_window
+        assert np.array_equal(got.offsets, want.offsets) and np.array_equal(got.values, want.values)
+        assert not (np.array_equal(got.offsets, plain[0][k].offsets)
+                    and np.array_equal(got.values, plain[0][k].values))
+    assert all(2 <= max(abs(v) for v in misalignment(np.random.default_rng(s), 16)) <= 4 for s in range(200))
+
+
+def test_p_misalign_needs_a_cross_frame_config(tmp_path):
+    r = CliRunner().invoke(cli, ["train", str(dataset_from_example(tmp_path / "ds")), "-o", str(tmp_path / "run"),
+                                 "--p-misalign", "0.3", "--steps", "1"])
+    assert r.exit_code == 2 and "--p-misalign needs a cross-frame config" in r.output

@@ -5,7 +5,7 @@ consecutive frames that both have references (datasets made with `--ref-frames a
 from __future__ import annotations
 
 import json
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import lru_cache
 from pathlib import Path
 
@@ -261,22 +261,49 @@ def window_with_reference(pair: Pair, lo: int, hi: int, features: str = "log1p")
     return frames, gather_bins(ref, perm, ref.offsets), centre, ctxs
 
 
-def cropped(windows: list, rng: np.random.Generator, crop: int) -> list:
-    """The windows (frames, reference, centre, contexts) cut to one random crop with one random flip/transpose."""
+def cropped(windows: list, rng: np.random.Generator, crop: int, p_misalign: float = 0.0) -> list:
+    """The windows (frames, reference, centre, contexts) cut to one random crop with one random flip/transpose.
+
+    p_misalign: share of windows whose neighbour frames are cut `misaligned` (as if their motion vectors were
+    wrong); no random numbers are drawn for it at 0, so runs without it keep their crops."""
     win = random_window(windows[0][1], rng, crop)
     fx, fy, tr = (bool(b) for b in rng.integers(0, 2, 3))
-    return [([transform(f.crop(win), fx, fy, tr) for f in frames], transform(ref.crop(win), fx, fy, tr), centre,
-             ctxs) for frames, ref, centre, ctxs in windows]
+    shifts = None
+    if p_misalign > 0 and rng.random() < p_misalign:
+        shifts = [misalignment(rng, crop) for _ in range(max(len(w[0]) for w in windows))]
+
+    def cut(f, k, centre):
+        if shifts is None or k == centre:
+            return f.crop(win)
+        dx, dy = shifts[k]
+        moved = f.crop((win[0] + dx, win[1] + dy, win[2] + dx, win[3] + dy))
+        return replace(moved, data_window=tuple(win))
+
+    return [([transform(cut(f, k, centre), fx, fy, tr) for k, f in enumerate(frames)],
+             transform(ref.crop(win), fx, fy, tr), centre, ctxs) for frames, ref, centre, ctxs in windows]
 
 
-def sample_window(pair: Pair, rng: np.random.Generator, crop: int, window: int, features: str = "log1p") -> tuple:
+def misalignment(rng: np.random.Generator, crop: int) -> tuple[int, int]:
+    """A pixel offset (dx, dy) of 2 .. crop/4 pixels in a random direction: what a neighbour frame is moved by in a
+    misaligned training window. Teaches the cross-frame model to trust a neighbour only where it agrees with the
+    centre frame (refraction, wrong or missing motion vectors, disocclusions all look like this), which shots
+    without such cases never show it."""
+    reach = max(2, crop // 4)
+    while True:
+        dx, dy = (int(v) for v in rng.integers(-reach, reach + 1, 2))
+        if max(abs(dx), abs(dy)) >= 2:
+            return dx, dy
+
+
+def sample_window(pair: Pair, rng: np.random.Generator, crop: int, window: int, features: str = "log1p",
+                  p_misalign: float = 0.0) -> tuple:
     """(noisy crops of a window of frames, the reference crop, the centre's index, the frames' whole-frame
     contexts): windows up to `window` frames around the centre, shortened at random as at a sequence's ends, the
-    same crop and flip for all."""
+    same crop and flip for all (neighbours misaligned in a share `p_misalign` of the windows, see `cropped`)."""
     lo_all, hi_all = available_window(pair, window)
     r = rng.random()
     lo, hi = (lo_all, hi_all) if r < 0.6 else ((lo_all, 0) if r < 0.75 else ((0, hi_all) if r < 0.9 else (0, 0)))
-    return cropped([window_with_reference(pair, lo, hi, features)], rng, crop)[0]
+    return cropped([window_with_reference(pair, lo, hi, features)], rng, crop, p_misalign)[0]
 
 
 def sample_consecutive(pairs: tuple, rng: np.random.Generator, crop: int, window: int,

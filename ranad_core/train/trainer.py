@@ -48,6 +48,7 @@ class TrainConfig:
     temporal_weight: float = 0.0  # cross-frame configs: weight of the temporal loss; > 0 trains on consecutive frames
     until: int | None = None      # stop (with a checkpoint) at this step; the schedule still runs to `steps`
     freeze_spatial: bool = False  # cross-frame configs: train only the temporal parts; the single-frame model stays
+    p_misalign: float = 0.0       # cross-frame configs: share of windows with misaligned neighbours (data.cropped)
     loss_weights: tuple = ()      # (term, weight) pairs overriding weights.WEIGHTS, e.g. (("separation", 1.0),)
 
 
@@ -112,6 +113,8 @@ def check_freeze(cfg: TrainConfig, config) -> None:
         raise RanadError("--freeze-spatial needs a cross-frame config (e.g. cpu-small-p-xf)", cfg.config)
     if cfg.freeze_spatial and not cfg.init:
         raise RanadError("--freeze-spatial needs --init (the single-frame model to keep)", cfg.config)
+    if cfg.p_misalign > 0 and config.window <= 1:
+        raise RanadError("--p-misalign needs a cross-frame config (e.g. cpu-small-p-xf)", cfg.config)
 
 
 def freeze_spatial(model, cfg: TrainConfig) -> None:
@@ -185,7 +188,7 @@ def pair_loss(net, pair, rng: np.random.Generator, cfg: TrainConfig, cross: bool
     without bins."""
     features = unwrap(net).config.features
     if cross:
-        frames, ref_img, centre, ctxs = sample_window(pair, rng, cfg.crop, cfg.window, features)
+        frames, ref_img, centre, ctxs = sample_window(pair, rng, cfg.crop, cfg.window, features, cfg.p_misalign)
         frames, ref_img = reduce_window(frames, ref_img, rng, cfg.p_no_aux, cfg.p_no_split)
         window = [prepare(f, c.z_stats, features, c.scale) for f, c in zip(frames, ctxs)]
         noisy, ref = window[centre], prepare(ref_img)
