@@ -645,7 +645,8 @@ def campaign(cases: int, seed: int, start: int = 0, cpu_limit: float = 5.0, mem_
         worker.close()
         return {"seed": seed, "start": start, "cases": done, "seconds": round(time.time() - t_start, 1),
                 "read": counts["read"], "refused": counts["refused"],
-                **{k: counts[k] for k in FAILURES}, "hang_retried": counts["hang_retried"], "max_cpu_s": max_cpu, "max_peak_mib": round(max_peak / 2**20, 1),
+                **{k: counts[k] for k in FAILURES}, "hang_retried": counts["hang_retried"], "max_cpu_s": max_cpu,
+                "max_peak_mib": round(max_peak / 2**20, 1),
                 "corpus": [os.path.basename(c[0]) for c in corpus], "failures": failures}
     finally:
         shutil.rmtree(tmp, ignore_errors=True)

@@ -2,9 +2,9 @@
 plus an SSIM term on the tone-mapped image (structure the per-pixel terms miss: blotches, lost edges); L1 on
 alpha and relative L1 on depth; optionally (weight 0 by default) a depth-separation term: SMAPE of the
 composites of the bins in front of and behind the crop's median reference depth, each flattened alone, which is
-what a compositor's holdout or insertion sees (colour moved between depth layers, wrong alpha). For cross-frame training on consecutive frames, a temporal term: L1 between the
-change of the tone-mapped composite from one frame to the next and the reference's change (the flicker that
-`ranad eval --temporal` measures)."""
+what a compositor's holdout or insertion sees (colour moved between depth layers, wrong alpha). For cross-frame
+training on consecutive frames, a temporal term: L1 between the change of the tone-mapped composite from one frame
+to the next and the reference's change (the flicker that `ranad eval --temporal` measures)."""
 
 from __future__ import annotations
 
