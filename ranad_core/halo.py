@@ -8,9 +8,10 @@ first halo (a multiple of denoise.ALIGN) whose output matches the whole frame's:
 to its own magnitude plus its channel's mean magnitude, at most MEAN_TOL on average and MAX_TOL at worst (relative
 to the channel mean alone, a bright bin of a dim channel, a specular highlight, turned its 1e-4 rounding into
 "7%"). Even the bound does not match exactly: tiles of other sizes sum in another order, and the float16 rounding
-of the embeddings (the AOV cache's precision) turns those 1e-7 differences into 1e-3 ones in a few bins (measured on cpu-small-p-v1, 128x128
-held-out frames: at the bound, mean 1.5e-6, worst 7e-3; with no halo, mean 2e-3 to 6e-3, worst 2 to 45). `ranad
-export --measure-halo FRAMES` stores the halo in the model's metadata ("halo"), which denoise.halo_for then uses.
+of the embeddings (the AOV cache's precision) turns those 1e-7 differences into 1e-3 ones in a few bins (measured
+on cpu-small-p-v1, 128x128 held-out frames: at the bound, mean 1.5e-6, worst 7e-3; with no halo, mean 2e-3 to
+6e-3, worst 2 to 45). `ranad export --measure-halo FRAMES` stores the halo in the model's metadata ("halo"), which
+denoise.halo_for then uses.
 
 A cross-frame model is measured on single-frame windows; what those skip (the T-Mix blocks' radii and the temporal
 kernel steps', once, or twice with the output mix) is added to the measured halo before it is rounded up to ALIGN.

@@ -15,7 +15,6 @@ from ..metrics import ssim, tonemap
 from .weights import WEIGHTS
 
 
-
 def smape(pred: torch.Tensor, target: torch.Tensor, eps: float = 1e-2) -> torch.Tensor:
     return ((pred - target).abs() / (pred.abs() + target.abs() + eps)).mean()
 
@@ -31,9 +30,7 @@ def separation(pred: dict, ref: dict, offsets: torch.Tensor) -> torch.Tensor:
     """Mean SMAPE of the front and back composites (bins with reference depth below / from the median reference
     depth of the crop, each flattened alone; the split follows the reference so both sides hold the same bins)."""
     z = ref["depth"][:, 0]
-    zs = z.sort().values
-    split = (zs[(len(zs) - 1) // 2] + zs[len(zs) // 2]) / 2   # the median as metrics.split_depth takes it
-    front = (z < split).to(z.dtype)[:, None]
+    front = (z < torch.quantile(z, 0.5)).to(z.dtype)[:, None]   # the median as metrics.split_depth takes it
     return sum(smape(composite(_masked(pred, m), offsets), composite(_masked(ref, m), offsets))
                for m in (front, 1 - front)) / 2
 
