@@ -16,6 +16,7 @@ class ReconConfig:
     head_dim: int = 8
     radius: float = 2.5
     radius_growth: float = 1.0
+    keep: bool = False           # the scale mixer may also keep the noisy value itself (an identity "scale")
 
 
 @dataclass(frozen=True)
@@ -75,6 +76,14 @@ CONFIGS["cpu-small-xfm"] = ModelConfig(**{**CONFIGS["cpu-small-xf"].__dict__, "n
 CONFIGS["cpu-small-p"] = ModelConfig(**{**CONFIGS["cpu-small"].__dict__, "name": "cpu-small-p", "features": "prior"})
 CONFIGS["cpu-small-p-xf"] = ModelConfig(**{**CONFIGS["cpu-small-xf"].__dict__, "name": "cpu-small-p-xf",
                                           "features": "prior"})
+
+
+# cpu-small-p whose reconstructions may keep a bin's own noisy value (reconstruction.py): where the input is already
+# clean (64 spp, opaque alpha) a bin need not be blurred with its neighbours; issue 24
+CONFIGS["cpu-small-pk"] = ModelConfig(**{**CONFIGS["cpu-small-p"].__dict__, "name": "cpu-small-pk",
+                                        "recon": _recon(**{k: {"keep": True} for k in CONFIGS["cpu-small-p"].recon})})
+CONFIGS["cpu-small-pk-xf"] = ModelConfig(**{**CONFIGS["cpu-small-p-xf"].__dict__, "name": "cpu-small-pk-xf",
+                                           "recon": CONFIGS["cpu-small-pk"].recon})
 
 
 def get_config(name: str) -> ModelConfig:
