@@ -286,8 +286,10 @@ def denoise_window(model, images: list, centre: int, mapping: ChannelMap | None 
     with stage("assemble"):
         out = _assemble(img, mapping, c.srt, c.perm, outs, keep_noisy) if n else img
     if want_embeddings:
-        dim = model.config.dim
-        embs = [e if e is not None else np.zeros((fr.srt.num_bins, dim), np.float16) for e, fr in zip(embs, frames)]
+        dim = model.config.dim   # a cross-frame model with input keys: the centre's [backbone | keys] (crossframe.py)
+        wide = 2 * dim if cross and getattr(model, "input_keys", False) and len(frames) > 1 else dim
+        embs = [e if e is not None else np.zeros((fr.srt.num_bins, wide if f == centre else dim), np.float16)
+                for f, (e, fr) in enumerate(zip(embs, frames))]
     return FrameResult(out, n, c.nonfinite, tiles, embs, [fr.perm for fr in frames],
                        [fr.stats for fr in frames], [fr.srt.offsets for fr in frames], mapping, dropped, centre)
 

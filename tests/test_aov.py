@@ -19,6 +19,7 @@ from ranad_core.denoise import denoise_window
 from ranad_core.exr import read_deep, write_deep
 from ranad_core.model import RaNAD, feature_dim, get_config
 from ranad_core.model.crossframe import CrossFrameRaNAD
+from ranad_core.model.config import ModelConfig
 
 SHOT = Path(__file__).resolve().parents[1] / "examples" / "synth_shot"
 GROUPS = ("lg_key", "lg_fill", "lg_rim")
@@ -51,7 +52,15 @@ def models():
     mixed = CrossFrameRaNAD.from_cross(cross, get_config("cpu-small-xfm"), feature_dim()).eval()
     for g in mixed.mix_gate.values():          # and the output mix
         torch.nn.init.constant_(g.bias, 0.0)
-    return single, cross, mixed
+    keyed = CrossFrameRaNAD.from_single(single, input_keys_config(), feature_dim()).eval()
+    for g in keyed.temporal_gate.values():
+        torch.nn.init.constant_(g.bias, 0.0)
+    return single, cross, mixed, keyed
+
+
+def input_keys_config():
+    """cpu-small-xf with the temporal step keyed by the bins' inputs (the *-xk configs, on log1p features)."""
+    return ModelConfig(**{**get_config("cpu-small-xf").__dict__, "name": "xk", "temporal_keys": "inputs"})
 
 
 def test_layers_and_rules():
@@ -62,9 +71,9 @@ def test_layers_and_rules():
     assert kernel_rule("lg_key") == "colour"
 
 
-@pytest.mark.parametrize("kind", ["single", "cross", "output-mix"])
+@pytest.mark.parametrize("kind", ["single", "cross", "output-mix", "input-keys"])
 def test_light_groups_sum_to_the_denoised_beauty(kind):
-    model = dict(zip(("single", "cross", "output-mix"), models()))[kind]
+    model = dict(zip(("single", "cross", "output-mix", "input-keys"), models()))[kind]
     frames = [exact_groups(read_deep(SHOT / f"noisy_spp16.{i:04d}.exr")) for i in range(3)]
     lg, rgb = sums(frames[1])
     assert np.abs(lg - rgb).max() < 1e-6

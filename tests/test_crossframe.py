@@ -145,6 +145,48 @@ def test_output_mix_starts_from_a_cross_frame_model_and_keeps_the_rules():
         CrossFrameRaNAD.from_cross(single, get_config("cpu-small-xfm"), feature_dim())
 
 
+def test_input_keys_leave_the_centre_features_alone():
+    """A cross-frame model keyed by the bins' inputs (no T-Mix): with one frame, or its temporal gates shut, it
+    is the single-frame model; the centre's backbone features do not depend on the neighbours; opened, the
+    neighbours change the result, tiles equal the whole frame, the halo bound is the single model's plus the
+    temporal step's, and gradients reach the key embedding."""
+    from ranad_core.model.config import ModelConfig
+
+    single, cross = small_models()
+    config = ModelConfig(**{**get_config("cpu-small-xf").__dict__, "name": "xk", "temporal_keys": "inputs"})
+    keyed = CrossFrameRaNAD.from_single(single, config, feature_dim()).eval()
+    assert len(keyed.tmix) == 0
+    frames = [read_deep(SHOT / f"noisy_spp16.{i:04d}.exr") for i in range(3)]
+    one = denoise_window(single, frames[1:2], 0).image.values
+    np.testing.assert_array_equal(denoise_window(keyed, frames[1:2], 0).image.values, one)
+    for g in keyed.temporal_gate.values():
+        torch.nn.init.constant_(g.bias, -1e4)
+    np.testing.assert_allclose(denoise_window(keyed, frames, 1).image.values, one, rtol=1e-6, atol=1e-7)
+    assert receptive_field(single) < receptive_field(keyed) < receptive_field(cross)
+    for g in keyed.temporal_gate.values():
+        torch.nn.init.constant_(g.bias, 0.0)
+    whole = denoise_window(keyed, frames, 1).image.values
+    assert np.abs(whole - one).max() > 1e-3
+    np.testing.assert_allclose(denoise_window(keyed, frames, 1, tile=16).image.values, whole, rtol=1e-4, atol=1e-5)
+    moved = compensate([f.crop((0, 0, 23, 23)) for f in frames], 1)[0]
+    window = [prepare(f.sorted()[0]) for f in moved]
+    other = [prepare(f.sorted()[0]) for f in moved]
+    other[0].features = other[0].features.flip(0)            # a neighbour with other contents
+    with torch.no_grad():
+        a, b = keyed.embeddings(window, 1), keyed.embeddings(other, 1)
+        dim = config.dim
+        torch.testing.assert_close(a[1][:, :dim], b[1][:, :dim], rtol=0, atol=0)
+        assert not torch.equal(a[0], b[0])
+        torch.testing.assert_close(a[1][:, :dim], single.embeddings(window[1]), rtol=1e-5, atol=1e-5)
+    keyed.train()
+    sum(v.square().mean() for v in keyed(window, 1).values()).backward()
+    for name in ("temporal_embed.0.weight", "temporal.diffuse.k.weight", "temporal_gate.alpha.bias"):
+        g = dict(keyed.named_parameters())[name].grad
+        assert g is not None and g.abs().max() > 0, name
+    with pytest.raises(ValueError):                          # no per-frame features for an output mix
+        CrossFrameRaNAD(ModelConfig(**{**config.__dict__, "output_mix": True}), feature_dim())
+
+
 def test_gradients_reach_the_temporal_modules():
     _, cross = small_models()
     cross.train()

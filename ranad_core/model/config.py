@@ -35,6 +35,10 @@ class ModelConfig:
     temporal_radius: float = 1.0  # radius of the T-Mix blocks and the temporal reconstruction step
     output_mix: bool = False      # cross-frame: a temporal step over the window's spatially denoised frames at the end
     features: str = "log1p"       # input feature set (inputs.FEATURE_SETS): "prior" = exposure-normalised + flat prior
+    # cross-frame: what the temporal step's keys are made of. "backbone": every frame's U-Net features, mixed by
+    # T-Mix blocks; "inputs": a small MLP of each bin's own inputs (no T-Mix), so only the centre frame runs the
+    # backbone and its features are the single-frame model's, untouched by the neighbours (crossframe.py)
+    temporal_keys: str = "backbone"
 
     def to_dict(self) -> dict:
         d = asdict(self)
@@ -83,6 +87,14 @@ CONFIGS["cpu-small-p-xf"] = ModelConfig(**{**CONFIGS["cpu-small-xf"].__dict__, "
 CONFIGS["cpu-small-pk"] = ModelConfig(**{**CONFIGS["cpu-small-p"].__dict__, "name": "cpu-small-pk",
                                         "recon": _recon(**{k: {"keep": True} for k in CONFIGS["cpu-small-p"].recon})})
 CONFIGS["cpu-small-pk-xf"] = ModelConfig(**{**CONFIGS["cpu-small-p-xf"].__dict__, "name": "cpu-small-pk-xf",
+                                           "recon": CONFIGS["cpu-small-pk"].recon})
+
+
+# the cross-frame model whose neighbours only enter through the temporal step, keyed by their inputs: a window
+# costs one backbone pass (the centre's) plus a cheap embedding of the neighbours' bins; issues 25, 27
+CONFIGS["cpu-small-p-xk"] = ModelConfig(**{**CONFIGS["cpu-small-p-xf"].__dict__, "name": "cpu-small-p-xk",
+                                          "temporal_keys": "inputs"})
+CONFIGS["cpu-small-pk-xk"] = ModelConfig(**{**CONFIGS["cpu-small-p-xk"].__dict__, "name": "cpu-small-pk-xk",
                                            "recon": CONFIGS["cpu-small-pk"].recon})
 
 

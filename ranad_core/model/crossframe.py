@@ -14,6 +14,12 @@
   that the spatial kernels weigh differently in each window: this targets flicker directly. Still a kernel over
   noisy values (linear in them), so AOVs reuse it.
 
+With `temporal_keys="inputs"` (configs *-xk) there are no T-Mix blocks: only the centre frame runs the backbone,
+so its features, and with a frozen spatial part its whole spatial reconstruction, are the single-frame model's
+whatever the neighbours hold, and the temporal step's keys are a small MLP of each window bin's own inputs (colour,
+prior, guides, depth, frame offset): enough to tell whether a neighbour's bin shows the same surface, at the cost
+of one backbone pass per window instead of one per frame.
+
 A window of one frame skips the T-Mix blocks and the temporal step, so a cross-frame model with one frame is the
 single-frame model it was initialised from (`from_single`): the new one-hot inputs start with zero weights and
 the T-Mix output projections start at zero (identity blocks).
@@ -38,7 +44,9 @@ FRAME_FEATURES = 2 * MAX_OFFSET + 1
 # output projections at zero, the temporal gate nearly closed. AdamW moves a parameter by about the learning
 # rate per step whatever its gradient, so at the base rate a gate logit starting at -4 hardly moves
 # (cpu-small-xf-v1's first 2500 steps moved it by at most 0.06) and the model stays the single-frame one.
-LR_SCALE = {"temporal_gate.": 10.0, "tmix.": 3.0, "temporal.": 3.0, "mix_gate.": 10.0, "mix.": 3.0}
+LR_SCALE = {"temporal_gate.": 10.0, "tmix.": 3.0, "temporal.": 3.0, "temporal_embed.": 3.0, "mix_gate.": 10.0,
+            "mix.": 3.0}
+TEMPORAL_KEYS = ("backbone", "inputs")
 
 
 def temporal_layout(layouts: list) -> tuple[Layout, torch.Tensor]:
@@ -77,8 +85,15 @@ class CrossFrameRaNAD(nn.Module):
         self.config = config
         self.single = RaNAD(config, in_dim + FRAME_FEATURES, backend)
         c = config
+        if c.temporal_keys not in TEMPORAL_KEYS or (c.temporal_keys == "inputs" and c.output_mix):
+            raise ValueError(f"config {c.name!r}: temporal_keys {c.temporal_keys!r} (one of {TEMPORAL_KEYS}; "
+                             f"'inputs' has no per-frame features for an output mix)")
+        self.input_keys = c.temporal_keys == "inputs"
         self.tmix = nn.ModuleList(TemporalMix(c.dim, c.heads, c.head_dim, c.temporal_radius, backend)
-                                  for _ in range(c.unets))
+                                  for _ in range(0 if self.input_keys else c.unets))
+        if self.input_keys:
+            self.temporal_embed = nn.Sequential(nn.Linear(in_dim + FRAME_FEATURES, c.dim), nn.ReLU(),
+                                                nn.Linear(c.dim, c.dim))
         self.temporal = nn.ModuleDict({name: KernelAttention(c.dim, r.heads, r.head_dim, c.temporal_radius, backend)
                                        for name, r in c.recon.items()})
         # per-bin share of the temporal result (a function of the features only, so the output stays linear in
@@ -119,7 +134,17 @@ class CrossFrameRaNAD(nn.Module):
         return next((m for prefix, m in LR_SCALE.items() if name.startswith(prefix)), 1.0)
 
     def embeddings(self, frames: list, centre: int) -> list:
-        """Per-frame backbone embeddings of the window (inputs of every frame on the centre frame's grid)."""
+        """Per-frame embeddings of the window (inputs of every frame on the centre frame's grid): the backbone's
+        for every frame, or with input keys the temporal keys for every frame and, for the centre, its backbone
+        features in front of its keys ([N, 2 dim]). What the AOV cache keeps."""
+        if self.input_keys:
+            c = frames[centre]
+            own = self.single.backbone(self.single.embed(with_frame_id(c, 0)), c.layout)
+            if len(frames) == 1:
+                return [own]
+            feats = [self.temporal_embed(with_frame_id(f, i - centre)) for i, f in enumerate(frames)]
+            feats[centre] = torch.cat([own, feats[centre]], 1)
+            return feats
         layouts = [f.layout for f in frames]
         feats = [self.single.embed(with_frame_id(f, i - centre)) for i, f in enumerate(frames)]
         keys, gather = temporal_layout(layouts) if len(frames) > 1 else (None, None)
@@ -135,6 +160,12 @@ class CrossFrameRaNAD(nn.Module):
         c = frames[centre]
         out = {}
         keys, gather = temporal_layout([f.layout for f in frames]) if len(frames) > 1 else (None, None)
+        if self.input_keys and len(frames) > 1:   # split the centre's [backbone | keys] (see embeddings)
+            dim = self.config.dim
+            feats = list(feats)
+            own, feats[centre] = feats[centre][:, :dim], feats[centre][:, dim:]
+        else:
+            own = feats[centre]
         for name, rec in self.single.recon.items():
             if name not in c.layers:
                 continue
@@ -143,10 +174,10 @@ class CrossFrameRaNAD(nn.Module):
             if len(frames) > 1:
                 allv = torch.cat(vals)[gather]
                 allf = torch.cat(feats)[gather]
-                t = self.temporal[name](feats[centre], allf, c.layout.pixels, keys, allv)
-                g = torch.sigmoid(self.temporal_gate[name](feats[centre]))
+                t = self.temporal[name](own, allf, c.layout.pixels, keys, allv)
+                g = torch.sigmoid(self.temporal_gate[name](own))
                 v = v + g * (t - v)
-            out[name] = rec(feats[centre], c.layout, v)
+            out[name] = rec(own, c.layout, v)
             if self.config.output_mix and len(frames) > 1:
                 spatial = [out[name] if i == centre else rec(feats[i], f.layout, vals[i])
                            for i, f in enumerate(frames)]
