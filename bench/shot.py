@@ -1,0 +1,76 @@
+"""Cross-frame cost per frame: `ranad denoise` on a shot with the cross-frame model against the single-frame model,
+in the same run (issue 27's "cross-frame per-frame cost <= 1.5x single-frame").
+
+The shot is the bundled example's three frames (`examples/synth_shot`, with per-bin motion) tiled to --size and
+played forth and back (0 1 2 1 0) so that most frames have a full window of three; the motion of the returning
+frames points the wrong way, which changes what the temporal step finds but not what it costs. Every run is a
+separate `ranad denoise` process over the whole shot (model load, reads, denoise, writes); the ratio is of the
+whole runs, so the per-shot overheads count too.
+
+Usage: python bench/shot.py [--size 960x540] [--threads 2] [--single cpu-small-p-v2] [--cross cpu-small-p-xf-v2]
+           [--cross ANOTHER ...] [--args "--profile"]
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import tempfile
+import time
+
+ROOT = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..")
+sys.path.insert(0, ROOT)
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from denoise import DENOISE, run_measured, tile_to  # noqa: E402
+
+from ranad_core.exr import read_deep, write_deep  # noqa: E402
+
+SHOT = os.path.join(ROOT, "examples", "synth_shot", "noisy_spp16.{:04d}.exr")
+ORDER = (0, 1, 2, 1, 0)
+
+
+def make_shot(folder: str, width: int, height: int) -> str:
+    for k, src in enumerate(ORDER):
+        write_deep(os.path.join(folder, f"shot.{k:04d}.exr"), tile_to(read_deep(SHOT.format(src)), width, height))
+    return os.path.join(folder, "shot.####.exr")
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--size", default="960x540")
+    ap.add_argument("--threads", type=int, default=2)
+    ap.add_argument("--single", default="cpu-small-p-v2")
+    ap.add_argument("--cross", action="append", default=[])
+    ap.add_argument("--args", default="", help="options added to every ranad denoise run (e.g. --profile)")
+    a = ap.parse_args()
+    width, height = (int(v) for v in a.size.lower().split("x"))
+    crosses = a.cross or ["cpu-small-p-xf-v2"]
+    with tempfile.TemporaryDirectory() as folder:
+        t = time.perf_counter()
+        pattern = make_shot(folder, width, height)
+        img = read_deep(pattern.replace("####", "0001"))
+        print(f"made the shot ({len(ORDER)} frames, {img.width}x{img.height}, {img.num_bins} bins per frame) in "
+              f"{time.perf_counter() - t:.1f} s")
+
+        def run(model: str, tag: str) -> dict:
+            out = os.path.join(folder, tag, "d.####.exr")
+            res = run_measured(DENOISE, pattern, "-o", out, "--model", model, "--threads", str(a.threads),
+                               *a.args.split(), threads=a.threads)
+            if "| stage |" in res["output"]:
+                print(f"  {model}:\n    " + res["output"][res["output"].index("| stage |"):].strip()
+                      .replace("\n", "\n    "))
+            return res
+
+        single = run(a.single, "single")
+        per = single["seconds"] / len(ORDER)
+        print(f"  single-frame {a.single}: {single['seconds']:7.1f} s ({per:.1f} s per frame), "
+              f"peak {single['peak_mb']:.0f} MB")
+        for k, model in enumerate(crosses):
+            r = run(model, f"cross{k}")
+            print(f"  cross-frame {model}: {r['seconds']:7.1f} s ({r['seconds'] / len(ORDER):.1f} s per frame, "
+                  f"{r['seconds'] / single['seconds']:.2f}x single-frame), peak {r['peak_mb']:.0f} MB")
+
+
+if __name__ == "__main__":
+    main()
