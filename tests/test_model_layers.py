@@ -42,11 +42,10 @@ def test_rana_block_shapes_and_gradients():
     assert block.attn.bias.grad.abs().sum() > 0
 
 
-@pytest.mark.parametrize("keep", [False, True])
-def test_reconstruction_is_linear_in_the_noisy_values_and_batches_aovs(keep):
+def test_reconstruction_is_linear_in_the_noisy_values_and_batches_aovs():
     lay = layout(seed=3)
     torch.manual_seed(1)
-    rec = Reconstruction(dim=16, scales=3, heads=2, head_dim=8, radius=1.5, keep=keep)
+    rec = Reconstruction(dim=16, scales=3, heads=2, head_dim=8, radius=1.5)
     feat = torch.randn(lay.bins, 16)
     x, y = torch.rand(lay.bins, 3), torch.rand(lay.bins, 3)
     with torch.no_grad():
@@ -56,29 +55,6 @@ def test_reconstruction_is_linear_in_the_noisy_values_and_batches_aovs(keep):
         torch.testing.assert_close(both, torch.cat([fx, fy], 1), atol=1e-6, rtol=1e-6)
         # light groups that sum to the beauty give denoised groups that sum to the denoised beauty
         torch.testing.assert_close(fx + fy, rec(feat, lay, x + y), atol=1e-5, rtol=1e-5)
-
-
-def test_keep_row_mixes_the_noisy_value_itself():
-    """With `keep`, the output is (1 - w) x (the scales' mix) + w x (the noisy value), w the keep row's softmax
-    share: a mixer that puts everything on it returns the input bit for bit, one that puts nothing on it returns
-    the mix of the scales alone (the same modules without `keep`)."""
-    lay = layout(seed=5)
-    torch.manual_seed(3)
-    plain = Reconstruction(dim=16, scales=3, heads=2, head_dim=8, radius=1.5)
-    kept = Reconstruction(dim=16, scales=3, heads=2, head_dim=8, radius=1.5, keep=True)
-    state = plain.state_dict()
-    state["mixer.weight"] = torch.cat([state["mixer.weight"], torch.randn(1, 16)])
-    state["mixer.bias"] = torch.cat([state["mixer.bias"], torch.zeros(1)])
-    kept.load_state_dict(state)
-    feat, x = torch.randn(lay.bins, 16), torch.rand(lay.bins, 3)
-    with torch.no_grad():
-        logits = kept.mixer(feat)
-        w = torch.softmax(logits, 1)[:, 3:]
-        torch.testing.assert_close(kept(feat, lay, x), (1 - w) * plain(feat, lay, x) + w * x, atol=1e-5, rtol=1e-5)
-        kept.mixer.bias[3] = 1e4
-        assert torch.equal(kept(feat, lay, x), x)
-        kept.mixer.bias[3] = -1e4
-        torch.testing.assert_close(kept(feat, lay, x), plain(feat, lay, x), atol=1e-6, rtol=1e-6)
 
 
 def test_multi_unet_keeps_the_layout_and_trains():

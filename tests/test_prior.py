@@ -136,45 +136,6 @@ def test_start_from_the_other_feature_set(frame, tmp_path):
     torch.testing.assert_close(new.embed(inputs.features), new.embed(f2))
 
 
-def test_start_a_keep_model_from_one_without(frame, tmp_path):
-    """A cpu-small-pk model started from cpu-small-p weights: every old weight copied, each scale mixer one row
-    longer (zero weights, a bias worth KEEP_START of the mix at the old biases), so the start is the old model's
-    output moved by at most that share towards the noisy value."""
-    import json
-
-    from safetensors.torch import save_file
-
-    from ranad_core.model import RaNAD, get_config
-    from ranad_core.train.trainer import KEEP_START, init_single
-
-    torch.manual_seed(4)
-    old = RaNAD(get_config("cpu-small-p"), feature_dim("prior")).eval()
-    for name, p in old.named_parameters():   # untrained mixers have biases near 0: make them differ
-        if name.endswith("mixer.bias"):
-            p.data = torch.randn_like(p)
-    path = tmp_path / "old.safetensors"
-    save_file({k: v.contiguous() for k, v in old.state_dict().items()}, str(path),
-              metadata={"model_config": json.dumps(old.config.to_dict())})
-    new = RaNAD(get_config("cpu-small-pk"), feature_dim("prior")).eval()
-    init_single(new, str(path))
-    for name, t in old.state_dict().items():
-        got = new.state_dict()[name]
-        torch.testing.assert_close(got[:t.shape[0]], t)
-        if got.shape != t.shape:
-            assert name.endswith(("mixer.weight", "mixer.bias")) and got.shape[0] == t.shape[0] + 1
-            if name.endswith("bias"):
-                share = torch.softmax(got, 0)[-1].item()
-                assert share == pytest.approx(KEEP_START, rel=1e-5)
-    inputs = prepare(with_prior(frame.sorted()[0]), features="prior")
-    with torch.no_grad():
-        a, b = old(inputs), new(inputs)
-    for name in a:   # new = (1 - w) old + w noisy, w in (0, 1) per bin (0 movement where old equals noisy)
-        noisy = inputs.layers[name]
-        moved = (b[name] - a[name]).abs()
-        assert (moved <= (noisy - a[name]).abs() + 1e-5).all()
-    assert (b["diffuse"] - a["diffuse"]).abs().max() > 0
-
-
 def test_reduced_mode_crops_read_the_unguided_prior(frame):
     from ranad_core.train.data import without_aux
 

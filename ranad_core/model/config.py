@@ -16,7 +16,6 @@ class ReconConfig:
     head_dim: int = 8
     radius: float = 2.5
     radius_growth: float = 1.0
-    keep: bool = False           # the scale mixer may also keep the noisy value itself (an identity "scale")
 
 
 @dataclass(frozen=True)
@@ -82,20 +81,10 @@ CONFIGS["cpu-small-p-xf"] = ModelConfig(**{**CONFIGS["cpu-small-xf"].__dict__, "
                                           "features": "prior"})
 
 
-# cpu-small-p whose reconstructions may keep a bin's own noisy value (reconstruction.py): where the input is already
-# clean (64 spp, opaque alpha) a bin need not be blurred with its neighbours; issue 24
-CONFIGS["cpu-small-pk"] = ModelConfig(**{**CONFIGS["cpu-small-p"].__dict__, "name": "cpu-small-pk",
-                                        "recon": _recon(**{k: {"keep": True} for k in CONFIGS["cpu-small-p"].recon})})
-CONFIGS["cpu-small-pk-xf"] = ModelConfig(**{**CONFIGS["cpu-small-p-xf"].__dict__, "name": "cpu-small-pk-xf",
-                                           "recon": CONFIGS["cpu-small-pk"].recon})
-
-
 # the cross-frame model whose neighbours only enter through the temporal step, keyed by their inputs: a window
 # costs one backbone pass (the centre's) plus a cheap embedding of the neighbours' bins; issues 25, 27
 CONFIGS["cpu-small-p-xk"] = ModelConfig(**{**CONFIGS["cpu-small-p-xf"].__dict__, "name": "cpu-small-p-xk",
                                           "temporal_keys": "inputs"})
-CONFIGS["cpu-small-pk-xk"] = ModelConfig(**{**CONFIGS["cpu-small-p-xk"].__dict__, "name": "cpu-small-pk-xk",
-                                           "recon": CONFIGS["cpu-small-pk"].recon})
 
 
 def get_config(name: str) -> ModelConfig:

@@ -22,7 +22,7 @@ class RaNAD(nn.Module):
         self.backbone = MultiUNet(c.dim, c.unets, c.levels, c.blocks_per_level, c.heads, c.head_dim, c.radius,
                                   c.radius_growth, backend)
         self.recon = nn.ModuleDict({name: Reconstruction(c.dim, r.scales, r.heads, r.head_dim, r.radius,
-                                                         r.radius_growth, backend, r.keep)
+                                                         r.radius_growth, backend)
                                     for name, r in c.recon.items()})
 
     def embeddings(self, inputs: ModelInputs) -> torch.Tensor:

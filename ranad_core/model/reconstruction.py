@@ -4,9 +4,7 @@ values, so it is linear in them, and the same weights denoise any AOV batched in
 Stage 1 (pyramid): bin dropout picks sparser query bins; RaNA with those bins' embeddings as queries, the finer
 scale's embeddings as keys and its (blurred) layer as values gives the next, blurrier scale, with the radius
 growing per scale. Stage 2 (per-scale denoising): full-resolution embeddings query each scale's embeddings, with
-that scale's layer as values. Stage 3: a scale mixer (FC + softmax over scales) weights the per-scale results;
-with `keep`, the noisy layer itself is one more candidate, so a bin whose input is already clean (high spp, opaque
-alpha) can stay as it is rather than take the nearest kernel's blur, which no softmax over neighbours can undo.
+that scale's layer as values. Stage 3: a scale mixer (FC + softmax over scales) weights the per-scale results.
 Every step is a softmax-weighted average of values, so output(a x + b y) = a output(x) + b output(y).
 """
 
@@ -47,13 +45,13 @@ class Reconstruction(nn.Module):
     """One output layer's reconstruction module (number of scales, radii and dropout pattern per layer)."""
 
     def __init__(self, dim: int, scales: int = 3, heads: int = 2, head_dim: int = 8, radius: float = 2.5,
-                 radius_growth: float = 1.0, backend: str = "auto", keep: bool = False):
+                 radius_growth: float = 1.0, backend: str = "auto"):
         super().__init__()
-        self.scales, self.keep = scales, keep
+        self.scales = scales
         radii = [radius + radius_growth * s for s in range(scales)]
         self.down = nn.ModuleList(KernelAttention(dim, heads, head_dim, radii[s], backend) for s in range(scales - 1))
         self.per_scale = nn.ModuleList(KernelAttention(dim, heads, head_dim, radii[s], backend) for s in range(scales))
-        self.mixer = nn.Linear(dim, scales + int(keep))
+        self.mixer = nn.Linear(dim, scales)
 
     def forward(self, feat: torch.Tensor, layout: Layout, noisy: torch.Tensor) -> torch.Tensor:
         """feat [N, dim] backbone embeddings, noisy [N, C] layer values (any C: AOVs batch here) -> [N, C]."""
@@ -66,7 +64,5 @@ class Reconstruction(nn.Module):
             layouts.append(coarse)
         outs = [self.per_scale[s](feat, feats[s], layout.pixels, layouts[s], images[s])  # stage 2
                 for s in range(self.scales)]
-        if self.keep:
-            outs.append(noisy)
         w = torch.softmax(self.mixer(feat), dim=1)  # stage 3: per-bin convex mix of the scales
-        return sum(w[:, s:s + 1] * o for s, o in enumerate(outs))
+        return sum(w[:, s:s + 1] * outs[s] for s in range(self.scales))

@@ -9,7 +9,6 @@ the log."""
 
 from __future__ import annotations
 
-import math
 import os
 import time
 from dataclasses import asdict, dataclass
@@ -167,8 +166,7 @@ def unwrap(net):
 def init_single(model, init_name: str) -> None:
     """Starts single-frame `model` from single-frame weights `init_name` of the same architecture, also when the
     feature sets differ (the new feature columns start at zero, so the model begins as the old one would on its
-    shared inputs) and when `model`'s reconstructions may keep the noisy value and the init's may not
-    (`grow_mixers`)."""
+    shared inputs)."""
     from ..model.inputs import old_columns
     from ..model.store import load_model
 
@@ -182,28 +180,7 @@ def init_single(model, init_name: str) -> None:
     new = w.new_zeros(w.shape[0], model.embed[0].in_features)
     new[:, old_columns(a.features, b.features)] = w
     state["embed.0.weight"] = new
-    grow_mixers(state, model.state_dict())
     model.load_state_dict(state)
-
-
-KEEP_START = 0.05   # share of the noisy value when a model without it starts one with `keep` (ReconConfig)
-
-
-def grow_mixers(state: dict, target: dict) -> None:
-    """Adds the keep-the-noisy-value row to every scale mixer in `state` that `target` has one more row for: zero
-    weights and a bias giving it KEEP_START of the mix where the old scales' logits are their biases, so training
-    starts close to the old model yet the new row's gradient is not negligible."""
-    for name, t in target.items():
-        if not (name.startswith("recon.") and ".mixer." in name) or name not in state:
-            continue
-        old = state[name]
-        if old.shape[0] + 1 != t.shape[0]:
-            continue
-        if name.endswith(".weight"):
-            state[name] = torch.cat([old, old.new_zeros(1, old.shape[1])])
-        else:
-            start = torch.logsumexp(old, 0) + math.log(KEEP_START / (1 - KEEP_START))
-            state[name] = torch.cat([old, start.reshape(1)])
 
 
 def pair_loss(net, pair, rng: np.random.Generator, cfg: TrainConfig, cross: bool):
