@@ -55,8 +55,6 @@ def models():
     keyed = CrossFrameRaNAD.from_single(single, input_keys_config(), feature_dim()).eval()
     for g in keyed.temporal_gate.values():
         torch.nn.init.constant_(g.bias, 0.0)
-    for a in keyed.temporal_agree.values():    # and its agreement term
-        torch.nn.init.normal_(a.weight, std=0.1)
     return single, cross, mixed, keyed
 
 

@@ -179,11 +179,8 @@ def test_input_keys_leave_the_centre_features_alone():
         assert not torch.equal(a[0], b[0])
         torch.testing.assert_close(a[1][:, :dim], single.embeddings(window[1]), rtol=1e-5, atol=1e-5)
     keyed.train()
-    for a in keyed.temporal_agree.values():                 # the agreement term starts at zero: open it
-        torch.nn.init.normal_(a.weight, std=0.1)
     sum(v.square().mean() for v in keyed(window, 1).values()).backward()
-    for name in ("temporal_embed.0.weight", "temporal.diffuse.k.weight", "temporal_gate.alpha.bias",
-                 "temporal_agree.diffuse.weight"):
+    for name in ("temporal_embed.0.weight", "temporal.diffuse.k.weight", "temporal_gate.alpha.bias"):
         g = dict(keyed.named_parameters())[name].grad
         assert g is not None and g.abs().max() > 0, name
     with pytest.raises(ValueError):                          # no per-frame features for an output mix

@@ -18,10 +18,7 @@ With `temporal_keys="inputs"` (configs *-xk) there are no T-Mix blocks: only the
 so its features, and with a frozen spatial part its whole spatial reconstruction, are the single-frame model's
 whatever the neighbours hold, and the temporal step's keys are a small MLP of each window bin's own inputs (colour,
 prior, guides, depth, frame offset): enough to tell whether a neighbour's bin shows the same surface, at the cost
-of one backbone pass per window instead of one per frame. Its gate also reads the agreement: the bin's own keys
-minus the same temporal kernel applied to the window's keys. Where the kernel gathers bins that look unlike the
-bin (refraction, wrong vectors) the gate can close; a gate of the centre's features alone cannot see that. The
-gate still depends on features only, so the output stays linear in the noisy values.
+of one backbone pass per window instead of one per frame.
 
 A window of one frame skips the T-Mix blocks and the temporal step, so a cross-frame model with one frame is the
 single-frame model it was initialised from (`from_single`): the new one-hot inputs start with zero weights and
@@ -47,8 +44,8 @@ FRAME_FEATURES = 2 * MAX_OFFSET + 1
 # output projections at zero, the temporal gate nearly closed. AdamW moves a parameter by about the learning
 # rate per step whatever its gradient, so at the base rate a gate logit starting at -4 hardly moves
 # (cpu-small-xf-v1's first 2500 steps moved it by at most 0.06) and the model stays the single-frame one.
-LR_SCALE = {"temporal_gate.": 10.0, "temporal_agree.": 10.0, "tmix.": 3.0, "temporal.": 3.0,
-            "temporal_embed.": 3.0, "mix_gate.": 10.0, "mix.": 3.0}
+LR_SCALE = {"temporal_gate.": 10.0, "tmix.": 3.0, "temporal.": 3.0, "temporal_embed.": 3.0, "mix_gate.": 10.0,
+            "mix.": 3.0}
 TEMPORAL_KEYS = ("backbone", "inputs")
 
 
@@ -97,11 +94,6 @@ class CrossFrameRaNAD(nn.Module):
         if self.input_keys:
             self.temporal_embed = nn.Sequential(nn.Linear(in_dim + FRAME_FEATURES, c.dim), nn.ReLU(),
                                                 nn.Linear(c.dim, c.dim))
-            # the gate's agreement term (see the module docstring); zero at the start: the gate as without it
-            self.temporal_agree = nn.ModuleDict({name: nn.Linear(c.dim, 1) for name in c.recon})
-            for a in self.temporal_agree.values():
-                nn.init.zeros_(a.weight)
-                nn.init.zeros_(a.bias)
         self.temporal = nn.ModuleDict({name: KernelAttention(c.dim, r.heads, r.head_dim, c.temporal_radius, backend)
                                        for name, r in c.recon.items()})
         # per-bin share of the temporal result (a function of the features only, so the output stays linear in
@@ -172,7 +164,6 @@ class CrossFrameRaNAD(nn.Module):
             dim = self.config.dim
             feats = list(feats)
             own, feats[centre] = feats[centre][:, :dim], feats[centre][:, dim:]
-            mine = feats[centre]
         else:
             own = feats[centre]
         for name, rec in self.single.recon.items():
@@ -184,12 +175,7 @@ class CrossFrameRaNAD(nn.Module):
                 allv = torch.cat(vals)[gather]
                 allf = torch.cat(feats)[gather]
                 t = self.temporal[name](own, allf, c.layout.pixels, keys, allv)
-                logit = self.temporal_gate[name](own)
-                if self.input_keys:   # the same kernel over the keys (a call of its own: AOV batches fill the
-                    # widest value head): what it gathered, against the bin's own keys
-                    gathered = self.temporal[name](own, allf, c.layout.pixels, keys, allf)
-                    logit = logit + self.temporal_agree[name](mine - gathered)
-                g = torch.sigmoid(logit)
+                g = torch.sigmoid(self.temporal_gate[name](own))
                 v = v + g * (t - v)
             out[name] = rec(own, c.layout, v)
             if self.config.output_mix and len(frames) > 1:
