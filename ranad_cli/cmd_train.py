@@ -53,8 +53,8 @@ def _loss_weight(text: str) -> tuple[str, float]:
               help="Stop at this step (checkpointed) although the learning-rate schedule runs to --steps: training "
                    "in chunks, each resumed with the same options and a later --until.")
 @click.option("--freeze-spatial", is_flag=True,
-              help="Cross-frame configs with --init: train only the temporal parts (T-Mix, the temporal kernel "
-                   "step and its gate); the single-frame model's weights stay as they are.")
+              help="Cross-frame configs with --init: train only the temporal parts (T-Mix or the input keys, the "
+                   "temporal kernel step and its gate); the single-frame model's weights stay as they are.")
 @click.option("--p-misalign", default=0.0, show_default=True, type=click.FloatRange(0, 1),
               help="Cross-frame configs: share of training windows whose neighbour frames are shifted by 2 to "
                    "crop/4 pixels, as if their motion vectors were wrong, so the model learns to use a neighbour "

@@ -119,9 +119,9 @@ def check_freeze(cfg: TrainConfig, config) -> None:
 
 def freeze_spatial(model, cfg: TrainConfig) -> None:
     """With `cfg.freeze_spatial`, the single-frame part of a cross-frame model (embedding, U-Nets, spatial
-    reconstruction) stops learning: only T-Mix, the temporal step and their gates train. The model then starts as
-    the single-frame one and can only add what the neighbours bring, instead of drifting away from a spatial
-    denoiser trained on many more scenes than the few shots a cross-frame run sees."""
+    reconstruction) stops learning: only T-Mix (or the input keys' MLP), the temporal step and their gates train.
+    The model then starts as the single-frame one and can only add what the neighbours bring, instead of drifting
+    away from a spatial denoiser trained on many more scenes than the few shots a cross-frame run sees."""
     if not cfg.freeze_spatial:    # train() has checked the options (check_freeze) before building it
         return
     for name, p in model.named_parameters():
