@@ -5,7 +5,8 @@ to rerun on other values:
 
 - tensors, for every frame k of the window the frame was denoised with (k = 0 only for single-frame models):
   `embeddings.k` float16 [N_k, dim] (the backbone's per-bin output, bins sorted front to back, neighbours
-  motion-compensated onto the centre frame), `perm.k` int64 [N_k] (sorted row i is row perm[i] of the
+  motion-compensated onto the centre frame; for input-keyed cross-frame models the temporal keys, and for the
+  centre [N, 2 dim]: its backbone output, then its keys), `perm.k` int64 [N_k] (sorted row i is row perm[i] of the
   compensated frame; for the centre frame, of the file), `offsets.k` int64 [H*W+1], `z_stats` float64 [K, 2]
   (the depth standardisation used per frame);
 - metadata (strings): `format` ("ranad-cache/1"), `model_id` (name@sha256 prefix of the weights), `model`
