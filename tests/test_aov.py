@@ -88,6 +88,31 @@ def test_light_groups_sum_to_the_denoised_beauty(kind):
     assert np.abs(lg_d - lg).max() > 1e-2 * scale          # the groups were denoised, not copied
 
 
+def test_aov_command_through_the_cache_of_an_input_keyed_model(tmp_path):
+    """The sequence default's kind of model (input keys: the centre's cache entry holds its backbone features and
+    its keys) through `ranad denoise --cache` and `ranad aov`: the light groups sum to the denoised beauty."""
+    from safetensors.torch import save_file
+
+    keyed = models()[3]
+    model = tmp_path / "xk.safetensors"
+    save_file({k: v.contiguous() for k, v in keyed.state_dict().items()}, str(model),
+              metadata={"model_config": json.dumps(keyed.config.to_dict())})
+    src = tmp_path / "in"
+    src.mkdir()
+    for f in range(3):
+        write_deep(src / f"b.{f:04d}.exr", exact_groups(read_deep(SHOT / f"noisy_spp16.{f:04d}.exr")))
+    run = lambda *a: CliRunner().invoke(cli, [str(x) for x in a])  # noqa: E731
+    r = run("denoise", src / "b.####.exr", "-o", tmp_path / "d" / "b.####.exr", "--model", model, "--cache",
+            tmp_path / "cache")
+    assert r.exit_code == 0, r.output
+    r = run("aov", tmp_path / "cache", "--layers", "lg_*", "-o", tmp_path / "a" / "lg.####.exr")
+    assert r.exit_code == 0, r.output
+    for f in range(3):
+        lg, _ = sums(read_deep(tmp_path / "a" / f"lg.{f:04d}.exr"))
+        _, rgb = sums(read_deep(tmp_path / "d" / f"b.{f:04d}.exr"))
+        assert np.abs(lg - rgb).max() < 1e-5 * np.abs(rgb).max()
+
+
 def test_aov_command_through_the_cache_and_refusals(tmp_path):
     single, *_ = models()
     from safetensors.torch import save_file
