@@ -88,38 +88,15 @@ def test_light_groups_sum_to_the_denoised_beauty(kind):
     assert np.abs(lg_d - lg).max() > 1e-2 * scale          # the groups were denoised, not copied
 
 
-def test_aov_command_through_the_cache_of_an_input_keyed_model(tmp_path):
-    """The sequence default's kind of model (input keys: the centre's cache entry holds its backbone features and
-    its keys) through `ranad denoise --cache` and `ranad aov`: the light groups sum to the denoised beauty."""
-    from safetensors.torch import save_file
-
-    keyed = models()[3]
-    model = tmp_path / "xk.safetensors"
-    save_file({k: v.contiguous() for k, v in keyed.state_dict().items()}, str(model),
-              metadata={"model_config": json.dumps(keyed.config.to_dict())})
-    src = tmp_path / "in"
-    src.mkdir()
-    for f in range(3):
-        write_deep(src / f"b.{f:04d}.exr", exact_groups(read_deep(SHOT / f"noisy_spp16.{f:04d}.exr")))
-    run = lambda *a: CliRunner().invoke(cli, [str(x) for x in a])  # noqa: E731
-    r = run("denoise", src / "b.####.exr", "-o", tmp_path / "d" / "b.####.exr", "--model", model, "--cache",
-            tmp_path / "cache")
-    assert r.exit_code == 0, r.output
-    r = run("aov", tmp_path / "cache", "--layers", "lg_*", "-o", tmp_path / "a" / "lg.####.exr")
-    assert r.exit_code == 0, r.output
-    for f in range(3):
-        lg, _ = sums(read_deep(tmp_path / "a" / f"lg.{f:04d}.exr"))
-        _, rgb = sums(read_deep(tmp_path / "d" / f"b.{f:04d}.exr"))
-        assert np.abs(lg - rgb).max() < 1e-5 * np.abs(rgb).max()
-
-
-def test_aov_command_through_the_cache_and_refusals(tmp_path):
-    single, *_ = models()
+def denoise_then_aov(net, tmp_path):
+    """`net` saved as a .safetensors model; the bundled shot with exact light groups denoised with `--cache`, then
+    `ranad aov` from the cache. Checks that every frame's groups keep the beauty's bins and sum to the denoised
+    beauty; returns (CLI runner, source folder, model path) for further steps."""
     from safetensors.torch import save_file
 
     model = tmp_path / "m.safetensors"
-    save_file({k: v.contiguous() for k, v in single.state_dict().items()}, str(model),
-              metadata={"model_config": json.dumps(single.config.to_dict())})
+    save_file({k: v.contiguous() for k, v in net.state_dict().items()}, str(model),
+              metadata={"model_config": json.dumps(net.config.to_dict())})
     src = tmp_path / "in"
     src.mkdir()
     for f in range(3):
@@ -136,6 +113,17 @@ def test_aov_command_through_the_cache_and_refusals(tmp_path):
         lg, _ = sums(a)
         _, rgb = sums(d)
         assert np.abs(lg - rgb).max() < 1e-5 * np.abs(rgb).max()
+    return run, src, model
+
+
+def test_aov_command_through_the_cache_of_an_input_keyed_model(tmp_path):
+    """The sequence default's kind of model (input keys: the centre's cache entry holds its backbone features and
+    its keys) through `ranad denoise --cache` and `ranad aov`: the light groups sum to the denoised beauty."""
+    denoise_then_aov(models()[3], tmp_path)
+
+
+def test_aov_command_through_the_cache_and_refusals(tmp_path):
+    run, src, model = denoise_then_aov(models()[0], tmp_path)
     # one step: ranad denoise --aovs writes the same light groups
     r = run("denoise", src / "b.####.exr", "-o", tmp_path / "one" / "b.####.exr", "--model", model, "--aovs", "lg_*")
     assert r.exit_code == 0, r.output
