@@ -28,7 +28,7 @@ import torch
 from .channels import ALIASES, EMISSION, RGB, SPECULAR, ChannelMap, canonical
 from .deep import DeepImage, replace_nonfinite, unsort
 from .errors import RanadError
-from .model.inputs import ModelInputs
+from .model.inputs import ModelInputs, modulation
 from .model.layers import Layout
 
 MAX_VALUE_CHANNELS = 63          # the RaNA kernels' widest value head is 64 channels
@@ -101,12 +101,13 @@ def denoise_aovs(model, images: list, centre: int, mapping: ChannelMap, layers: 
     h, w = images[centre].height, images[centre].width
     vals, window = [], []
     for k, img in enumerate(moved):
-        srt_perm = canonical(img, mapping)[0].sorted()[1]
+        srt, srt_perm = canonical(img, mapping)[0].sorted()
         if len(srt_perm) != len(perms[k]) or not np.array_equal(srt_perm, perms[k]):
             raise RanadError("the AOV frames do not match the cached bin layout (another render?)", None)
         vals.append(_values(img, mapping, layers, perms[k]))
         layout = Layout.of(torch.as_tensor(offsets[k]), h, w)
-        window.append(ModelInputs(layout, None, {}))
+        mod = modulation(srt)   # what the primary pass demodulated the diffuse layer by (demodulating models)
+        window.append(ModelInputs(layout, None, {}, None if mod is None else torch.from_numpy(mod)))
     feats = [torch.from_numpy(np.asarray(e, np.float16)).float() for e in embeddings]
     total = vals[centre]["diffuse"].shape[1]
     denoised = {"diffuse": [], "specular": []}
@@ -122,7 +123,7 @@ def denoise_aovs(model, images: list, centre: int, mapping: ChannelMap, layers: 
                         inp.layers = {name: v[name][:, a:b]}
                     res = model.reconstruct(feats, window, centre)[name]
                 else:
-                    res = model.recon[name](feats[0], window[0].layout, vals[0][name][:, a:b])
+                    res = model.reconstruct_layer(name, feats[0], window[0], vals[0][name][:, a:b])
                 denoised[name].append(res)
     total_out = (torch.cat(denoised["diffuse"], 1) + torch.cat(denoised["specular"], 1) + vals[centre]["pass"])
     out = unsort(total_out.numpy(), perms[centre])

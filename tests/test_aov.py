@@ -12,14 +12,14 @@ import pytest
 import torch
 from click.testing import CliRunner
 
+from model_factory import demodulating, input_keys_config
 from ranad_cli.main import cli
 from ranad_core.aov import aov_layers, denoise_aovs, kernel_rule
 from ranad_core.channels import detect
-from ranad_core.denoise import denoise_window
+from ranad_core.denoise import denoise_window, is_cross_frame
 from ranad_core.exr import read_deep, write_deep
 from ranad_core.model import RaNAD, feature_dim, get_config
 from ranad_core.model.crossframe import CrossFrameRaNAD
-from ranad_core.model.config import ModelConfig
 
 SHOT = Path(__file__).resolve().parents[1] / "examples" / "synth_shot"
 GROUPS = ("lg_key", "lg_fill", "lg_rim")
@@ -55,12 +55,12 @@ def models():
     keyed = CrossFrameRaNAD.from_single(single, input_keys_config(), feature_dim()).eval()
     for g in keyed.temporal_gate.values():
         torch.nn.init.constant_(g.bias, 0.0)
-    return single, cross, mixed, keyed
-
-
-def input_keys_config():
-    """cpu-small-xf with the temporal step keyed by the bins' inputs (the *-xk configs, on log1p features)."""
-    return ModelConfig(**{**get_config("cpu-small-xf").__dict__, "name": "xk", "temporal_keys": "inputs"})
+    demod = RaNAD(demodulating(get_config("cpu-small")), feature_dim()).eval()
+    demod.load_state_dict(single.state_dict())
+    demod_keyed = CrossFrameRaNAD(demodulating(input_keys_config()), feature_dim()).eval()
+    demod_keyed.load_state_dict(keyed.state_dict())
+    return {"single": single, "cross": cross, "output-mix": mixed, "input-keys": keyed, "demodulated": demod,
+            "demodulated-input-keys": demod_keyed}
 
 
 def test_layers_and_rules():
@@ -71,13 +71,14 @@ def test_layers_and_rules():
     assert kernel_rule("lg_key") == "colour"
 
 
-@pytest.mark.parametrize("kind", ["single", "cross", "output-mix", "input-keys"])
+@pytest.mark.parametrize("kind", ["single", "cross", "output-mix", "input-keys", "demodulated",
+                                  "demodulated-input-keys"])
 def test_light_groups_sum_to_the_denoised_beauty(kind):
-    model = dict(zip(("single", "cross", "output-mix", "input-keys"), models()))[kind]
+    model = models()[kind]
     frames = [exact_groups(read_deep(SHOT / f"noisy_spp16.{i:04d}.exr")) for i in range(3)]
     lg, rgb = sums(frames[1])
     assert np.abs(lg - rgb).max() < 1e-6
-    images, centre = (frames, 1) if kind != "single" else ([frames[1]], 0)
+    images, centre = (frames, 1) if is_cross_frame(model) else ([frames[1]], 0)
     res = denoise_window(model, images, centre, want_embeddings=True, tile=16)   # tiles: the primary pass
     layers = aov_layers(frames[1].channels, "lg_*")
     out = denoise_aovs(model, images, centre, detect(frames[1]), layers, res.embeddings, res.perms, res.offsets)
@@ -119,11 +120,17 @@ def denoise_then_aov(net, tmp_path):
 def test_aov_command_through_the_cache_of_an_input_keyed_model(tmp_path):
     """The sequence default's kind of model (input keys: the centre's cache entry holds its backbone features and
     its keys) through `ranad denoise --cache` and `ranad aov`: the light groups sum to the denoised beauty."""
-    denoise_then_aov(models()[3], tmp_path)
+    denoise_then_aov(models()["input-keys"], tmp_path)
+
+
+def test_aov_command_through_the_cache_of_a_demodulating_model(tmp_path):
+    """A model that divides the diffuse layer by the albedo: `ranad aov` rebuilds the same modulation from the
+    files, so the light groups still sum to the denoised beauty."""
+    denoise_then_aov(models()["demodulated-input-keys"], tmp_path)
 
 
 def test_aov_command_through_the_cache_and_refusals(tmp_path):
-    run, src, model = denoise_then_aov(models()[0], tmp_path)
+    run, src, model = denoise_then_aov(models()["single"], tmp_path)
     # one step: ranad denoise --aovs writes the same light groups
     r = run("denoise", src / "b.####.exr", "-o", tmp_path / "one" / "b.####.exr", "--model", model, "--aovs", "lg_*")
     assert r.exit_code == 0, r.output

@@ -38,6 +38,8 @@ class ModelConfig:
     # T-Mix blocks; "inputs": a small MLP of each bin's own inputs (no T-Mix), so only the centre frame runs the
     # backbone and its features are the single-frame model's, untouched by the neighbours (crossframe.py)
     temporal_keys: str = "backbone"
+    # divide the diffuse layer by its albedo guide before the kernels and multiply back after (reconstruction.py)
+    demodulate: bool = False
 
     def to_dict(self) -> dict:
         d = asdict(self)
@@ -85,6 +87,20 @@ CONFIGS["cpu-small-p-xf"] = ModelConfig(**{**CONFIGS["cpu-small-xf"].__dict__, "
 # costs one backbone pass (the centre's) plus a cheap embedding of the neighbours' bins; issues 25, 27
 CONFIGS["cpu-small-p-xk"] = ModelConfig(**{**CONFIGS["cpu-small-p-xf"].__dict__, "name": "cpu-small-p-xk",
                                           "temporal_keys": "inputs"})
+
+# cpu-small-p-xk whose temporal step only gathers the bins at the bin's own (motion-compensated) pixel in each
+# frame: a radius of 1 also blurred the centre frame spatially before the spatial reconstruction (issue 25)
+CONFIGS["cpu-small-p-xk0"] = ModelConfig(**{**CONFIGS["cpu-small-p-xk"].__dict__, "name": "cpu-small-p-xk0",
+                                           "temporal_radius": 0.0})
+
+# cpu-small-p with albedo demodulation of the diffuse layer: textures the albedo guide shows are not averaged away
+# (issue 24)
+CONFIGS["cpu-small-pd"] = ModelConfig(**{**CONFIGS["cpu-small-p"].__dict__, "name": "cpu-small-pd",
+                                        "demodulate": True})
+
+# the input-keyed cross-frame model (radius-0 temporal step, as cpu-small-p-xk0) on cpu-small-pd
+CONFIGS["cpu-small-pd-xk"] = ModelConfig(**{**CONFIGS["cpu-small-p-xk0"].__dict__, "name": "cpu-small-pd-xk",
+                                           "demodulate": True})
 
 
 def get_config(name: str) -> ModelConfig:

@@ -154,6 +154,11 @@ class CrossFrameRaNAD(nn.Module):
                 feats = self.tmix[k](feats, layouts, keys, gather)
         return feats
 
+    def embedding_width(self, is_centre: bool, frames: int) -> int:
+        """Width of a window frame's embedding (see embeddings): the centre's [backbone | keys] with input keys in
+        a window of several frames, the model's dim otherwise."""
+        return 2 * self.config.dim if self.input_keys and is_centre and frames > 1 else self.config.dim
+
     def reconstruct(self, feats: list, frames: list, centre: int, values: dict | None = None) -> dict:
         """Denoised layers of the centre frame; `values` (name -> per-frame [N_f, C] list) replaces the noisy
         layers, which is how AOVs reuse the kernels."""
@@ -170,6 +175,12 @@ class CrossFrameRaNAD(nn.Module):
             if name not in c.layers:
                 continue
             vals = values[name] if values is not None else [f.layers[name] for f in frames]
+            # a demodulating model works on every frame's values divided by that frame's modulation and multiplies
+            # the result by the centre's (reconstruction.demodulated)
+            mods = [self.single.modulation(name, f) for f in frames]
+            if mods[centre] is not None:
+                mods = [v.new_ones(v.shape[0], 3) if m is None else m for m, v in zip(mods, vals)]
+                vals = [v / m.repeat(1, v.shape[1] // 3) for v, m in zip(vals, mods)]
             v = vals[centre]
             if len(frames) > 1:
                 allv = torch.cat(vals)[gather]
@@ -184,6 +195,8 @@ class CrossFrameRaNAD(nn.Module):
                 m = self.mix[name](feats[centre], allf, c.layout.pixels, keys, torch.cat(spatial)[gather])
                 g = torch.sigmoid(self.mix_gate[name](feats[centre]))
                 out[name] = out[name] + g * (m - out[name])
+            if mods[centre] is not None:
+                out[name] = out[name] * mods[centre].repeat(1, out[name].shape[1] // 3)
         return out
 
     def forward(self, frames: list, centre: int) -> dict:

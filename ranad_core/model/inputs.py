@@ -29,11 +29,21 @@ PERIODS = (2.0, 4.0, 8.0, 16.0)              # pixel-position encoding
 BIN_FREQS = 3                                # bin-index encoding
 
 
+# Albedo demodulation (models whose config has `demodulate`): the diffuse layer is divided per bin by its albedo
+# plus this floor before the kernels and multiplied back by the query bin's after, so kernels average irradiance
+# and a texture the albedo guide shows survives the smoothing (as in KPCN). The floor keeps dark albedos from
+# amplifying noise.
+DEMOD_FLOOR = 0.02
+
+
 @dataclass
 class ModelInputs:
     layout: Layout
     features: torch.Tensor      # [N, F]
     layers: dict                # name -> [N, C] noisy values (premultiplied radiance, alpha [N,1], depth [N,1])
+    # [N, 3] albedo + DEMOD_FLOOR where the image has albedo and the diffuse/specular split, else None: what a
+    # demodulating model divides the diffuse layer by (modulation())
+    modulation: torch.Tensor | None = None
 
     @property
     def feature_dim(self) -> int:
@@ -63,6 +73,15 @@ def _cols(img: DeepImage, names) -> np.ndarray:
 
 def _has(img: DeepImage, names) -> bool:
     return all(n in img.channels for n in names)
+
+
+def modulation(img: DeepImage) -> np.ndarray | None:
+    """[N, 3] the diffuse layer's modulation of a canonical image: its albedo guide (clipped to [0, 1]) plus
+    DEMOD_FLOOR, or None without albedo or without the split (the "diffuse" layer then holds the whole beauty,
+    specular light included, which the diffuse albedo does not modulate)."""
+    if not (_has(img, ALBEDO) and _has(img, SPECULAR)):
+        return None
+    return (np.clip(np.nan_to_num(_cols(img, ALBEDO)), 0, 1) + np.float32(DEMOD_FLOOR)).astype(np.float32)
 
 
 def depth_stats(img: DeepImage) -> tuple[float, float]:
@@ -110,4 +129,6 @@ def prepare(img: DeepImage, z_stats: tuple[float, float] | None = None, features
     bins = [f(b * math.pi / 2 ** k) for k in range(BIN_FREQS) for f in (torch.sin, torch.cos)]
     feats = torch.cat([torch.from_numpy(base), torch.stack(pos, 1), torch.stack(bins, 1),
                        (b / nb.clamp(min=1)).unsqueeze(1)], dim=1)
-    return ModelInputs(layout, feats, {k: torch.from_numpy(v) for k, v in layers.items()})
+    mod = modulation(img)
+    return ModelInputs(layout, feats, {k: torch.from_numpy(v) for k, v in layers.items()},
+                       None if mod is None else torch.from_numpy(mod))

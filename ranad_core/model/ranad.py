@@ -1,5 +1,7 @@
 """The single-frame RaNAD model (paper Fig. 6): input embedding, multi-U-Net backbone, one reconstruction module
-per output layer. Every output is a softmax-weighted combination of that layer's noisy values (linear in them).
+per output layer. Every output is a softmax-weighted combination of that layer's noisy values (linear in them);
+with `demodulate`, the diffuse layer's is one of its albedo-demodulated values, times the bin's albedo
+(reconstruction.demodulated).
 """
 
 from __future__ import annotations
@@ -10,7 +12,9 @@ from torch import nn
 from .backbone import MultiUNet
 from .config import ModelConfig
 from .inputs import ModelInputs
-from .reconstruction import Reconstruction
+from .reconstruction import Reconstruction, demodulated
+
+DEMODULATED = ("diffuse",)   # the layers a demodulating model divides by the albedo (inputs.modulation)
 
 
 class RaNAD(nn.Module):
@@ -29,8 +33,19 @@ class RaNAD(nn.Module):
         """The backbone's per-bin embeddings (what the AOV reuse caches)."""
         return self.backbone(self.embed(inputs.features), inputs.layout)
 
-    def forward(self, inputs: ModelInputs) -> dict:
+    def modulation(self, name: str, inputs: ModelInputs):
+        """What layer `name`'s values are demodulated by for these inputs (None: not demodulated)."""
+        return inputs.modulation if self.config.demodulate and name in DEMODULATED else None
+
+    def reconstruct_layer(self, name: str, emb: torch.Tensor, inputs: ModelInputs, values: torch.Tensor):
+        """Layer `name`'s reconstruction of `values` ([N, C], the noisy layer or AOVs batched) with embeddings
+        `emb`: the one way every caller (denoise, AOVs, training) applies a reconstruction module."""
+        return demodulated(self.recon[name], emb, inputs.layout, values, self.modulation(name, inputs))
+
+    def reconstruct(self, emb: torch.Tensor, inputs: ModelInputs) -> dict:
         """Denoised layers: name -> [N, C] for every configured layer the inputs carry."""
-        emb = self.embeddings(inputs)
-        return {name: mod(emb, inputs.layout, inputs.layers[name]) for name, mod in self.recon.items()
+        return {name: self.reconstruct_layer(name, emb, inputs, inputs.layers[name]) for name in self.recon
                 if name in inputs.layers}
+
+    def forward(self, inputs: ModelInputs) -> dict:
+        return self.reconstruct(self.embeddings(inputs), inputs)

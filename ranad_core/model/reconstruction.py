@@ -6,6 +6,11 @@ scale's embeddings as keys and its (blurred) layer as values gives the next, blu
 growing per scale. Stage 2 (per-scale denoising): full-resolution embeddings query each scale's embeddings, with
 that scale's layer as values. Stage 3: a scale mixer (FC + softmax over scales) weights the per-scale results.
 Every step is a softmax-weighted average of values, so output(a x + b y) = a output(x) + b output(y).
+
+Demodulation (`demodulated`, configs with `demodulate`): the values divided per bin by a modulation (the albedo
+guide, inputs.modulation) before the kernels and the result multiplied by the query bin's: still linear in the
+values (the same operator denoises AOVs, and light groups still sum to the beauty), but no longer a convex
+combination of them.
 """
 
 from __future__ import annotations
@@ -66,3 +71,13 @@ class Reconstruction(nn.Module):
                 for s in range(self.scales)]
         w = torch.softmax(self.mixer(feat), dim=1)  # stage 3: per-bin convex mix of the scales
         return sum(w[:, s:s + 1] * outs[s] for s in range(self.scales))
+
+
+def demodulated(rec: Reconstruction, feat: torch.Tensor, layout: Layout, values: torch.Tensor,
+                modulation: torch.Tensor | None) -> torch.Tensor:
+    """rec on values / modulation, times the modulation: values [N, 3k] (k RGB triplets, e.g. AOVs batched),
+    modulation [N, 3] or None (then rec alone)."""
+    if modulation is None:
+        return rec(feat, layout, values)
+    m = modulation.repeat(1, values.shape[1] // 3)
+    return m * rec(feat, layout, values / m)
