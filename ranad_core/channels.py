@@ -403,6 +403,10 @@ def canonical(img: DeepImage, m: ChannelMap) -> tuple[DeepImage, np.ndarray | No
         put(DEPTH_BACK, img.channel(m.depth_back))
     if m.coverage:
         put(COVERAGE, img.channel(m.coverage))
+    for names_ in (PRIOR, FLAT_NOISY):   # a flat prior ranad attached to the frame (carried through compensation)
+        if all(c in img.channels for c in names_):
+            for c in names_:
+                put(c, img.channel(c))
     values = np.stack(cols, 1) if cols else np.zeros((img.num_bins, 0), np.float32)
     out = DeepImage(values=values, offsets=img.offsets, channels=names, data_window=img.data_window,
                     display_window=img.display_window)

@@ -173,7 +173,10 @@ def model_features(model) -> str:
     return getattr(model.config, "features", "log1p")
 
 
-def _model_frame(img: DeepImage, mapping: ChannelMap, features: str = "log1p") -> _Frame:
+def _model_frame(img: DeepImage, mapping: ChannelMap, features: str = "log1p", prior: "FramePrior | None" = None
+                 ) -> _Frame:
+    """`prior`: the frame's flat prior made before motion compensation, whose channels `img` carries (a moved
+    neighbour, see denoise_window); None: made here, on `img` as it is."""
     canon, residual = canonical(img, mapping)
     canon, nonfinite = _fix_nonfinite(canon)
     if residual is not None:
@@ -182,12 +185,38 @@ def _model_frame(img: DeepImage, mapping: ChannelMap, features: str = "log1p") -
         srt, perm = canon.sorted()
         res = residual[perm] if residual is not None else None
         scale = 1.0
-        if features == "prior":  # whole-frame prior and exposure, before tiling, so tiles agree
+        if features == "prior" and prior is not None:
+            scale = prior.scale
+        elif features == "prior":  # whole-frame prior and exposure, before tiling, so tiles agree
             from .model.prior import frame_scale, with_prior
 
             srt = with_prior(srt, res, presorted=True)
             scale = frame_scale(srt)
     return _Frame(srt, perm, res, depth_stats(srt), nonfinite, features, scale)
+
+
+@dataclass
+class FramePrior:
+    """A frame's flat prior as its own bins carry it (channels.PRIOR + FLAT_NOISY, [N, 6] in the file's bin
+    order) and its exposure scale: made once per frame of a shot and carried by motion compensation onto every
+    centre frame whose window holds it, so OIDN runs once per frame rather than once per window and frame."""
+    columns: np.ndarray
+    scale: float
+
+    @classmethod
+    def of(cls, img: DeepImage, mapping: ChannelMap) -> "FramePrior":
+        from .channels import FLAT_NOISY, PRIOR
+
+        fr = _model_frame(img, mapping, "prior")
+        cols = np.stack([fr.srt.channel(c) for c in (*PRIOR, *FLAT_NOISY)], 1)
+        return cls(unsort(cols, fr.perm), fr.scale)
+
+    def attached(self, img: DeepImage) -> DeepImage:
+        """`img` (the frame it was made from) with the prior's channels added."""
+        from .channels import FLAT_NOISY, PRIOR
+
+        return img.with_values(np.concatenate([img.values, self.columns.astype(img.values.dtype)], 1),
+                               list(img.channels) + [*PRIOR, *FLAT_NOISY])
 
 
 def _tile_inputs(fr: _Frame, win, width: int):
@@ -216,12 +245,16 @@ def denoise_frame(model, img: DeepImage, mapping: ChannelMap | None = None, tile
 
 def denoise_window(model, images: list, centre: int, mapping: ChannelMap | None = None, tile: int | None = None,
                    halo: int | None = None, keep_noisy: str | None = None, want_embeddings: bool = False,
-                   progress=None, flows: list | None = None) -> FrameResult:
+                   progress=None, flows: list | None = None, priors: dict | None = None) -> FrameResult:
     """Denoise frame `centre` of `images` (a window of consecutive frames; neighbours are motion-compensated onto
     it, in display coordinates where their data windows differ). `tile`: tile size in pixels (None: the whole
     frame); `halo`: None for the model's receptive field; `keep_noisy`: a prefix under which the noisy versions
     of the replaced channels are kept; `progress(n)` is called per tile; `flows`: per frame, None or its
-    per-pixel flow [H, W, 4] (motion.compensate). A single-frame model uses the centre frame only."""
+    per-pixel flow [H, W, 4] (motion.compensate). A single-frame model uses the centre frame only.
+
+    A cross-frame model on the flat prior gets every frame's prior made on that frame before compensation and
+    carried with its bins (FramePrior); `priors`: per window frame, its FramePrior or None, a list the caller
+    keeps across the windows of a shot (shot.py) and this fills in where None."""
     from .motion import compensate
 
     cross = is_cross_frame(model)
@@ -229,13 +262,25 @@ def denoise_window(model, images: list, centre: int, mapping: ChannelMap | None 
         images, centre, flows = [images[centre]], 0, None
     img = images[centre]
     mapping = mapping or detect(img)
+    features = model_features(model)
+    carried = [None] * len(images)
+    if len(images) > 1 and features == "prior":
+        priors = [None] * len(images) if priors is None else priors
+        with stage("inputs"):
+            for i, im in enumerate(images):
+                if priors[i] is None:
+                    priors[i] = FramePrior.of(im, mapping)
+        carried = list(priors)
+        sources = [p.attached(im) for p, im in zip(carried, images)]
+    else:
+        sources = images
     if len(images) > 1:
         with stage("motion"):
-            moved, dropped = compensate(images, centre, flows=flows, motion=mapping.motion)
+            moved, dropped = compensate(sources, centre, flows=flows, motion=mapping.motion)
     else:
         moved, dropped = images, 0
     with stage("inputs"):
-        frames = [_model_frame(m, mapping, model_features(model)) for m in moved]
+        frames = [_model_frame(m, mapping, features, p) for m, p in zip(moved, carried)]
     c = frames[centre]
     n = c.srt.num_bins
     h, w = c.srt.height, c.srt.width
@@ -265,8 +310,7 @@ def denoise_window(model, images: list, centre: int, mapping: ChannelMap | None 
                         if cross:
                             pred = model.reconstruct(feats, window, centre)
                         else:
-                            pred = {k: m(feats[0], window[0].layout, window[0].layers[k])
-                                    for k, m in model.recon.items() if k in window[0].layers}
+                            pred = model.reconstruct(feats[0], window[0])
                 with stage("tiles/scatter"):
                     keep = _core_mask(parts[centre][2], win, core)
                     dst = parts[centre][1][keep]
@@ -286,9 +330,10 @@ def denoise_window(model, images: list, centre: int, mapping: ChannelMap | None 
     with stage("assemble"):
         out = _assemble(img, mapping, c.srt, c.perm, outs, keep_noisy) if n else img
     if want_embeddings:
-        dim = model.config.dim   # a cross-frame model with input keys: the centre's [backbone | keys] (crossframe.py)
-        wide = 2 * dim if cross and getattr(model, "input_keys", False) and len(frames) > 1 else dim
-        embs = [e if e is not None else np.zeros((fr.srt.num_bins, wide if f == centre else dim), np.float16)
+        def width(f):
+            return model.embedding_width(f == centre, len(frames)) if cross else model.config.dim
+
+        embs = [e if e is not None else np.zeros((fr.srt.num_bins, width(f)), np.float16)
                 for f, (e, fr) in enumerate(zip(embs, frames))]
     return FrameResult(out, n, c.nonfinite, tiles, embs, [fr.perm for fr in frames],
                        [fr.stats for fr in frames], [fr.srt.offsets for fr in frames], mapping, dropped, centre)

@@ -226,10 +226,10 @@ def window_of(frame, sequence: list, window: int) -> tuple[list, int]:
 
 class FrameStore:
     """Frames (one deep part each) read once and kept while a window may still need them (the shot is processed
-    in order)."""
+    in order), with each frame's flat prior once a cross-frame window has made it (denoise.FramePrior)."""
 
     def __init__(self, keep: int):
-        self.keep, self.images = max(1, keep), {}
+        self.keep, self.images, self.priors = max(1, keep), {}, {}
 
     def get(self, frame, part=None):
         key = (frame.path, part)
@@ -238,8 +238,22 @@ class FrameStore:
             img = read_deep(frame.path, part=part)
         self.images[key] = img
         while len(self.images) > self.keep:
-            self.images.pop(next(iter(self.images)))
+            self._evict()
         return img
+
+    def _evict(self) -> None:
+        key = next(iter(self.images))
+        self.images.pop(key)
+        self.priors.pop(key, None)
+
+    def priors_of(self, frames, part=None) -> list:
+        """Per frame, its FramePrior if one was kept, else None (the list denoise_window fills in)."""
+        return [self.priors.get((f.path, part)) for f in frames]
+
+    def keep_priors(self, frames, part, priors: list) -> None:
+        for f, p in zip(frames, priors):
+            if p is not None and (f.path, part) in self.images:
+                self.priors[(f.path, part)] = p
 
 
 KINDS = ("auto", "deepz", "deepoid")
@@ -341,7 +355,10 @@ def denoise_shot(jobs, loaded, opts: ShotOptions, frame_bar=None, tile_bar=None,
 
                 flows = [read_flow(flow_file(opts, f), im, opts.flow_direction, opts.flow_channels, opts.overrides)
                          for f, im in zip(members, images)]
-            result, bad = _denoise_part(model, images, centre, flows, where, opts, summary, halo, tile_bar, warn)
+            priors = store.priors_of(members, part)
+            result, bad = _denoise_part(model, images, centre, flows, where, opts, summary, halo, tile_bar, warn,
+                                        priors)
+            store.keep_priors(members, part, priors)
             replaced[index] = result.image
             if opts.cache_dir:
                 cache = cache_io.cache_path(opts.cache_dir, out, None if len(chosen) == 1 else str(key))
@@ -367,9 +384,10 @@ def denoise_shot(jobs, loaded, opts: ShotOptions, frame_bar=None, tile_bar=None,
     return summary
 
 
-def _denoise_part(model, images, centre, flows, where, opts, summary, halo, tile_bar, warn):
-    """One deep part of a frame, with the same part of its neighbours: checks, then denoise_window; returns
-    (FrameResult with .tile set, NaN/Inf bins found in any channel)."""
+def _denoise_part(model, images, centre, flows, where, opts, summary, halo, tile_bar, warn, priors=None):
+    """One deep part of a frame, with the same part of its neighbours: checks, then denoise_window (`priors`: its
+    list of the frames' flat priors, filled in there); returns (FrameResult with .tile set, NaN/Inf bins found in
+    any channel)."""
     img = images[centre]
     mapping = detect(img, opts.overrides, where)
     if opts.kind != "auto":                     # guess_kind sorts every bin: only when it is checked
@@ -391,7 +409,7 @@ def _denoise_part(model, images, centre, flows, where, opts, summary, halo, tile
     if tile_bar is not None and hasattr(tile_bar, "reset"):
         tile_bar.reset(ntiles)
     result = denoise_window(model, images, centre, mapping, tile, halo, opts.keep_noisy,
-                            opts.cache_dir is not None or bool(opts.aovs), tile_bar, flows)
+                            opts.cache_dir is not None or bool(opts.aovs), tile_bar, flows, priors)
     result.tile = tile
     if opts.aovs:
         with stage("aovs"):

@@ -13,12 +13,14 @@ import torch
 from click.testing import CliRunner
 
 from deep_factory import random_deep
+from model_factory import input_keys_config
 from ranad_cli.main import cli
 from ranad_core import cache as cache_io
 from ranad_core.denoise import denoise_window, receptive_field
 from ranad_core.exr import read_deep
 from ranad_core.exr.sequence import Frame
 from ranad_core.model import RaNAD, feature_dim, get_config, prepare
+from ranad_core.model.config import ModelConfig
 from ranad_core.model.crossframe import CrossFrameRaNAD
 from ranad_core.motion import FLOW_CHANNELS, compensate, displacement, rebucket
 from ranad_core.shot import window_of
@@ -150,11 +152,8 @@ def test_input_keys_leave_the_centre_features_alone():
     is the single-frame model; the centre's backbone features do not depend on the neighbours; opened, the
     neighbours change the result, tiles equal the whole frame, the halo bound is the single model's plus the
     temporal step's, and gradients reach the key embedding."""
-    from ranad_core.model.config import ModelConfig
-
     single, cross = small_models()
-    config = ModelConfig(**{**get_config("cpu-small-xf").__dict__, "name": "xk", "temporal_keys": "inputs"})
-    keyed = CrossFrameRaNAD.from_single(single, config, feature_dim()).eval()
+    keyed = CrossFrameRaNAD.from_single(single, input_keys_config(), feature_dim()).eval()
     assert len(keyed.tmix) == 0
     frames = [read_deep(SHOT / f"noisy_spp16.{i:04d}.exr") for i in range(3)]
     one = denoise_window(single, frames[1:2], 0).image.values
@@ -174,7 +173,7 @@ def test_input_keys_leave_the_centre_features_alone():
     other[0].features = other[0].features.flip(0)            # a neighbour with other contents
     with torch.no_grad():
         a, b = keyed.embeddings(window, 1), keyed.embeddings(other, 1)
-        dim = config.dim
+        dim = keyed.config.dim
         torch.testing.assert_close(a[1][:, :dim], b[1][:, :dim], rtol=0, atol=0)
         assert not torch.equal(a[0], b[0])
         torch.testing.assert_close(a[1][:, :dim], single.embeddings(window[1]), rtol=1e-5, atol=1e-5)
@@ -184,7 +183,7 @@ def test_input_keys_leave_the_centre_features_alone():
         g = dict(keyed.named_parameters())[name].grad
         assert g is not None and g.abs().max() > 0, name
     with pytest.raises(ValueError):                          # no per-frame features for an output mix
-        CrossFrameRaNAD(ModelConfig(**{**config.__dict__, "output_mix": True}), feature_dim())
+        CrossFrameRaNAD(ModelConfig(**{**keyed.config.__dict__, "output_mix": True}), feature_dim())
 
 
 def test_gradients_reach_the_temporal_modules():

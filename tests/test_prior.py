@@ -160,3 +160,51 @@ def test_prior_of_a_presorted_image_skips_the_sort_and_equals_it():
     shuffled = with_prior(img)                       # any bin order: the prior follows each bin
     _, perm = img.sorted()
     np.testing.assert_array_equal(shuffled.values[perm], a.values)
+
+
+def test_a_carried_prior_is_the_prior_made_on_the_frame():
+    """A frame's FramePrior attached to it and read back by the model's frame preparation gives the sorted
+    channels and exposure scale that making the prior there gives, bit for bit (the centre of a cross-frame window
+    is denoised as the single-frame path does)."""
+    from ranad_core.channels import detect
+    from ranad_core.denoise import FramePrior, _model_frame
+
+    img = read_deep(FRAME)
+    mapping = detect(img)
+    made = _model_frame(img, mapping, "prior")
+    prior = FramePrior.of(img, mapping)
+    carried = _model_frame(prior.attached(img), mapping, "prior", prior)
+    assert carried.srt.channels == made.srt.channels and carried.scale == made.scale
+    np.testing.assert_array_equal(carried.srt.values, made.srt.values)
+    np.testing.assert_array_equal(carried.perm, made.perm)
+
+
+def test_cross_frame_windows_make_each_frame_prior_once(tmp_path, monkeypatch):
+    """A shot through a cross-frame model on the prior: OIDN's prior is made once per frame, not once per window
+    and frame; each moved neighbour bin carries the prior of its own frame's pixel (training reads windows the
+    same way, train.data.compensated)."""
+    from ranad_core import denoise
+    from ranad_core.exr.sequence import Frame
+    from ranad_core.model.crossframe import CrossFrameRaNAD
+    from ranad_core.model.store import LoadedModel
+    from ranad_core.shot import ShotOptions, denoise_shot
+    from ranad_core.train.data import Pair, compensated
+
+    single = tiny("prior")
+    config = ModelConfig(**{**single.config.__dict__, "name": "tiny-pxk", "window": 3, "temporal_keys": "inputs"})
+    cross = CrossFrameRaNAD.from_single(single, config, feature_dim("prior")).eval()
+    made = []
+    of = denoise.FramePrior.of
+    monkeypatch.setattr(denoise.FramePrior, "of", classmethod(lambda cls, img, m: made.append(1) or of(img, m)))
+    shot = Path(FRAME).parent
+    frames = [Frame(str(shot / f"noisy_spp16.{i:04d}.exr"), i) for i in range(3)]
+    jobs = [(f, str(tmp_path / f"out.{f.frame:04d}.exr")) for f in frames]
+    denoise_shot(jobs, LoadedModel(cross, "tiny", "tiny"), ShotOptions(window=3))
+    assert len(made) == 3
+    pair = Pair(shot / "noisy_spp16.0001.exr", shot / "reference_spp16.0001.exr", "shot", "deepz", 16)
+    moved, centre, _, _ = compensated(pair, -1, 1, "prior")
+    assert centre == 1
+    for k in (0, 2):
+        own = with_prior(read_deep(shot / f"noisy_spp16.{k:04d}.exr"))
+        have = {tuple(r) for r in np.stack([own.channel(c) for c in PRIOR], 1).tolist()}
+        assert all(tuple(r) in have for r in np.stack([moved[k].channel(c) for c in PRIOR], 1).tolist())

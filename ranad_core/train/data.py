@@ -225,25 +225,20 @@ def window_frames(pair: Pair, offsets) -> list:
 def compensated(pair: Pair, lo: int, hi: int, features: str = "log1p") -> tuple:
     """(the noisy frames centre+lo .. centre+hi moved onto the centre frame with bins sorted front to back, the
     centre's index, the centre frame's sort permutation, each frame's whole-frame FrameContext). For the "prior"
-    feature set every moved frame carries its flat prior, computed as `ranad denoise` does on the compensated
-    frame."""
+    feature set every frame carries its flat prior made on the frame itself before compensation (load_noisy),
+    with its own exposure scale, as `ranad denoise` does (denoise.FramePrior)."""
+    from ..model.inputs import depth_stats
+    from ..model.prior import frame_scale
     from ..motion import compensate
 
-    frames = [load(p) for p in window_frames(pair, range(lo, hi + 1))]
+    frames = [load_noisy(p, features) for p in window_frames(pair, range(lo, hi + 1))]
+    scales = [frame_scale(f) if features == "prior" else 1.0 for f in frames]
     centre = -lo
     moved, _ = compensate(frames, centre)
     done = [f.sorted() for f in moved]
-    out, ctxs = [], []
-    for f, _ in done:
-        if features == "prior":
-            from ..model.prior import frame_scale, with_prior
-
-            f = with_prior(f, both=True)
-        from ..model.inputs import depth_stats
-
-        ctxs.append(FrameContext(depth_stats(f), frame_scale(f) if features == "prior" else 1.0))
-        out.append(f)
-    return tuple(out), centre, done[centre][1], tuple(ctxs)
+    out = tuple(f for f, _ in done)
+    ctxs = tuple(FrameContext(depth_stats(f), s) for f, s in zip(out, scales))
+    return out, centre, done[centre][1], ctxs
 
 
 def available_window(pair: Pair, window: int) -> tuple:
