@@ -24,8 +24,8 @@ from .inputs import feature_dim
 from .ranad import RaNAD
 
 WEIGHTS_DIR = Path(__file__).resolve().parents[1] / "weights"
-DEFAULT_MODEL = "cpu-small-p-v3"         # single frames
-DEFAULT_CROSS_MODEL = "cpu-small-p-xk-v1"  # sequences: frames with neighbours
+DEFAULT_MODEL = "cpu-small-pd-v1"        # single frames
+DEFAULT_CROSS_MODEL = "cpu-small-pd-xk-v1"  # sequences: frames with neighbours
 
 
 def default_model(sequence: bool) -> str:
