@@ -25,7 +25,8 @@ from dataclasses import dataclass, field
 import numpy as np
 import torch
 
-from .channels import DEPTH, DEPTH_BACK, DEPTHS, ChannelMap, canonical, detect, layer_values, split_layer
+from .channels import (DEPTH, DEPTH_BACK, DEPTHS, FLAT_NOISY, PRIOR, ChannelMap, canonical, detect, layer_values,
+                       split_layer)
 from .deep import DeepImage, replace_nonfinite, unsort
 from .model.inputs import depth_stats, prepare
 from .profile import record_tile, stage
@@ -205,16 +206,12 @@ class FramePrior:
 
     @classmethod
     def of(cls, img: DeepImage, mapping: ChannelMap) -> "FramePrior":
-        from .channels import FLAT_NOISY, PRIOR
-
         fr = _model_frame(img, mapping, "prior")
         cols = np.stack([fr.srt.channel(c) for c in (*PRIOR, *FLAT_NOISY)], 1)
         return cls(unsort(cols, fr.perm), fr.scale)
 
     def attached(self, img: DeepImage) -> DeepImage:
         """`img` (the frame it was made from) with the prior's channels added."""
-        from .channels import FLAT_NOISY, PRIOR
-
         return img.with_values(np.concatenate([img.values, self.columns.astype(img.values.dtype)], 1),
                                list(img.channels) + [*PRIOR, *FLAT_NOISY])
 
@@ -245,7 +242,8 @@ def denoise_frame(model, img: DeepImage, mapping: ChannelMap | None = None, tile
 
 def denoise_window(model, images: list, centre: int, mapping: ChannelMap | None = None, tile: int | None = None,
                    halo: int | None = None, keep_noisy: str | None = None, want_embeddings: bool = False,
-                   progress=None, flows: list | None = None, priors: dict | None = None) -> FrameResult:
+                   progress=None, flows: list | None = None, priors: list | None = None,
+                   keep_depth: bool = False) -> FrameResult:
     """Denoise frame `centre` of `images` (a window of consecutive frames; neighbours are motion-compensated onto
     it, in display coordinates where their data windows differ). `tile`: tile size in pixels (None: the whole
     frame); `halo`: None for the model's receptive field; `keep_noisy`: a prefix under which the noisy versions
@@ -254,7 +252,8 @@ def denoise_window(model, images: list, centre: int, mapping: ChannelMap | None 
 
     A cross-frame model on the flat prior gets every frame's prior made on that frame before compensation and
     carried with its bins (FramePrior); `priors`: per window frame, its FramePrior or None, a list the caller
-    keeps across the windows of a shot (shot.py) and this fills in where None."""
+    keeps across the windows of a shot (shot.py) and this fills in where None. `keep_depth`: the depth layer is
+    not reconstructed and the file's depths are written as they are."""
     from .motion import compensate
 
     cross = is_cross_frame(model)
@@ -297,6 +296,9 @@ def denoise_window(model, images: list, centre: int, mapping: ChannelMap | None 
                 parts = [_tile_inputs(fr, win, w) for fr in frames]
             if parts[centre][1].size:
                 window = [p[0] for p in parts]
+                if keep_depth:   # a layer the inputs do not carry is not reconstructed (nor written back)
+                    for inp in window:
+                        inp.layers.pop("depth", None)
                 with torch.inference_mode():
                     # embeddings are rounded to float16, the precision of the AOV cache, before the
                     # reconstruction, so `ranad aov` rebuilds exactly these kernels and light groups sum to this

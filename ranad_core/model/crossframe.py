@@ -171,6 +171,7 @@ class CrossFrameRaNAD(nn.Module):
             own, feats[centre] = feats[centre][:, :dim], feats[centre][:, dim:]
         else:
             own = feats[centre]
+        allf = torch.cat(feats)[gather] if len(frames) > 1 else None   # the window's keys, shared by every layer
         for name, rec in self.single.recon.items():
             if name not in c.layers:
                 continue
@@ -184,7 +185,6 @@ class CrossFrameRaNAD(nn.Module):
             v = vals[centre]
             if len(frames) > 1:
                 allv = torch.cat(vals)[gather]
-                allf = torch.cat(feats)[gather]
                 t = self.temporal[name](own, allf, c.layout.pixels, keys, allv)
                 g = torch.sigmoid(self.temporal_gate[name](own))
                 v = v + g * (t - v)
