@@ -32,6 +32,7 @@ class ShotOptions:
     halo: int | None = None                          # None: the model's receptive field
     max_memory: float = 8e9                          # bytes, the peak to stay under
     keep_noisy: str | None = None
+    keep_depth: bool = False                         # write the input's depths, not denoised ones
     cache_dir: str | None = None
     skip_existing: bool = False
     strict: bool = False                             # non-finite samples: error instead of fix
@@ -409,7 +410,7 @@ def _denoise_part(model, images, centre, flows, where, opts, summary, halo, tile
     if tile_bar is not None and hasattr(tile_bar, "reset"):
         tile_bar.reset(ntiles)
     result = denoise_window(model, images, centre, mapping, tile, halo, opts.keep_noisy,
-                            opts.cache_dir is not None or bool(opts.aovs), tile_bar, flows, priors)
+                            opts.cache_dir is not None or bool(opts.aovs), tile_bar, flows, priors, opts.keep_depth)
     result.tile = tile
     if opts.aovs:
         with stage("aovs"):

@@ -174,6 +174,21 @@ def test_tile_and_halo(tmp_path, model_file):
     assert r.exit_code == 2 and "--halo" in r.output
 
 
+def test_keep_depth_writes_the_input_depths_and_denoises_the_rest(tmp_path, model_file):
+    """--keep-depth: Z and ZBack are the input's bit for bit, every other denoised channel is what the run without
+    it writes (the depth layer only feeds its own output); without it the depths change."""
+    assert run("denoise", FRAME, "-o", tmp_path / "d.exr", "--model", model_file).exit_code == 0
+    r = run("denoise", FRAME, "-o", tmp_path / "k.exr", "--model", model_file, "--keep-depth")
+    assert r.exit_code == 0, r.output
+    src, den, kept = (read_deep(p) for p in (FRAME, tmp_path / "d.exr", tmp_path / "k.exr"))
+    for c in ("Z", "ZBack"):
+        np.testing.assert_array_equal(kept.channel(c), src.channel(c))
+        assert not np.array_equal(den.channel(c), src.channel(c))
+    others = [c for c in src.channels if c not in ("Z", "ZBack")]
+    np.testing.assert_array_equal(kept.select(others).values, den.select(others).values)
+    assert not np.array_equal(kept.channel("R"), src.channel("R"))
+
+
 def test_kind_names_and_checks_the_input_kind(tmp_path, model_file):
     """The example is deep-OID (one bin per object id per pixel): auto and --kind deepoid report it; the same
     bins with one id for all of them are deep-Z, reported by auto and accepted by --kind deepz. A frame of the
