@@ -97,8 +97,8 @@ def parse_bytes(text: str) -> float:
                    "flat prior, per-tile gather / backbone / reconstruction / scatter, assemble, AOVs, cache, "
                    "write) and a per-tile summary (bins with the halo, halo overlap, seconds per tile).")
 def denoise_cmd(inputs, output, frames, model, device, threads, kind, maps, preset, motion_units, fps, shutter,
-                motion_y, keep_noisy, keep_depth, tile, halo, max_memory, cache_dir, skip_existing, shard, strict, window, aovs,
-                reference, parts, flow, flow_direction, flow_channels, profile):
+                motion_y, keep_noisy, keep_depth, tile, halo, max_memory, cache_dir, skip_existing, shard, strict,
+                window, aovs, reference, parts, flow, flow_direction, flow_channels, profile):
     """Denoise deep EXR INPUTS (files or patterns such as beauty.####.exr) into deep EXRs with the same pixels,
     bins, bin order, channels, ids and header: diffuse, specular, alpha and depth are denoised and the beauty
     is rebuilt from them.
@@ -141,7 +141,8 @@ def denoise_cmd(inputs, output, frames, model, device, threads, kind, maps, pres
         except OSError as e:
             raise RanadError(f"cannot create the cache folder ({e.strerror or e})", cache_dir) from None
     opts = ShotOptions(model_spec=model, overrides=overrides, tile=tile, halo=halo, max_memory=budget,
-                       keep_noisy=keep_noisy, keep_depth=keep_depth, cache_dir=cache_dir, skip_existing=skip_existing, strict=strict,
+                       keep_noisy=keep_noisy, keep_depth=keep_depth, cache_dir=cache_dir,
+                       skip_existing=skip_existing, strict=strict,
                        aovs=aovs, kind=kind, parts=tuple(parts), flow=flow, flow_direction=flow_direction,
                        flow_channels=None if flow_channels is None else
                        tuple(c.strip() for c in flow_channels.split(",") if c.strip()))

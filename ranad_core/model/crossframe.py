@@ -35,7 +35,7 @@ from .config import ModelConfig
 from .inputs import ModelInputs
 from .layers import Layout, MultiHeadRaNA
 from .ranad import RaNAD
-from .reconstruction import KernelAttention
+from .reconstruction import KernelAttention, per_channel
 
 MAX_OFFSET = 3                       # frames -3..+3 around the centre (windows up to 7)
 FRAME_FEATURES = 2 * MAX_OFFSET + 1
@@ -181,7 +181,7 @@ class CrossFrameRaNAD(nn.Module):
             mods = [self.single.modulation(name, f) for f in frames]
             if mods[centre] is not None:
                 mods = [v.new_ones(v.shape[0], 3) if m is None else m for m, v in zip(mods, vals)]
-                vals = [v / m.repeat(1, v.shape[1] // 3) for v, m in zip(vals, mods)]
+                vals = [v / per_channel(m, v) for v, m in zip(vals, mods)]
             v = vals[centre]
             if len(frames) > 1:
                 allv = torch.cat(vals)[gather]
@@ -196,7 +196,7 @@ class CrossFrameRaNAD(nn.Module):
                 g = torch.sigmoid(self.mix_gate[name](feats[centre]))
                 out[name] = out[name] + g * (m - out[name])
             if mods[centre] is not None:
-                out[name] = out[name] * mods[centre].repeat(1, out[name].shape[1] // 3)
+                out[name] = out[name] * per_channel(mods[centre], out[name])
         return out
 
     def forward(self, frames: list, centre: int) -> dict:

@@ -79,5 +79,10 @@ def demodulated(rec: Reconstruction, feat: torch.Tensor, layout: Layout, values:
     modulation [N, 3] or None (then rec alone)."""
     if modulation is None:
         return rec(feat, layout, values)
-    m = modulation.repeat(1, values.shape[1] // 3)
+    m = per_channel(modulation, values)
     return m * rec(feat, layout, values / m)
+
+
+def per_channel(modulation: torch.Tensor, values: torch.Tensor) -> torch.Tensor:
+    """The [N, 3] modulation repeated over the k RGB triplets of values [N, 3k] (the layer, or AOVs batched)."""
+    return modulation.repeat(1, values.shape[1] // 3)
