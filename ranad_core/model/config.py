@@ -36,7 +36,8 @@ class ModelConfig:
     features: str = "log1p"       # input feature set (inputs.FEATURE_SETS): "prior" = exposure-normalised + flat prior
     # cross-frame: what the temporal step's keys are made of. "backbone": every frame's U-Net features, mixed by
     # T-Mix blocks; "inputs": a small MLP of each bin's own inputs (no T-Mix), so only the centre frame runs the
-    # backbone and its features are the single-frame model's, untouched by the neighbours (crossframe.py)
+    # backbone and its features are the single-frame model's, untouched by the neighbours (crossframe.py); "match":
+    # as "inputs", with candidates scored by an MLP of their difference from the query (matching.py)
     temporal_keys: str = "backbone"
     # divide the diffuse layer by its albedo guide before the kernels and multiply back after (reconstruction.py)
     demodulate: bool = False
@@ -101,6 +102,11 @@ CONFIGS["cpu-small-pd"] = ModelConfig(**{**CONFIGS["cpu-small-p"].__dict__, "nam
 # the input-keyed cross-frame model (radius-0 temporal step, as cpu-small-p-xk0) on cpu-small-pd
 CONFIGS["cpu-small-pd-xk"] = ModelConfig(**{**CONFIGS["cpu-small-p-xk0"].__dict__, "name": "cpu-small-pd-xk",
                                            "demodulate": True})
+
+# cpu-small-pd-xk whose radius-0 temporal step scores each candidate bin by a small MLP of its embedding's
+# difference from the query's (matching.py) rather than a dot product: misaligned bins can be told apart (issue 25)
+CONFIGS["cpu-small-pd-xm"] = ModelConfig(**{**CONFIGS["cpu-small-pd-xk"].__dict__, "name": "cpu-small-pd-xm",
+                                           "temporal_keys": "match"})
 
 
 def get_config(name: str) -> ModelConfig:

@@ -14,7 +14,8 @@
   that the spatial kernels weigh differently in each window: this targets flicker directly. Still a kernel over
   noisy values (linear in them), so AOVs reuse it.
 
-With `temporal_keys="inputs"` (configs *-xk) there are no T-Mix blocks: only the centre frame runs the backbone,
+With `temporal_keys="inputs"` (configs *-xk) or `"match"` (configs *-xm, matching.py: the temporal step scores each
+candidate bin by an MLP of its difference from the query rather than a dot product) there are no T-Mix blocks: only the centre frame runs the backbone,
 so its features, and with a frozen spatial part its whole spatial reconstruction, are the single-frame model's
 whatever the neighbours hold, and the temporal step's keys are a small MLP of each window bin's own inputs (colour,
 prior, guides, depth, frame offset): enough to tell whether a neighbour's bin shows the same surface, at the cost
@@ -34,6 +35,7 @@ from ..rana import concat_frames
 from .config import ModelConfig
 from .inputs import ModelInputs
 from .layers import Layout, MultiHeadRaNA
+from .matching import MatchKernel
 from .ranad import RaNAD
 from .reconstruction import KernelAttention, per_channel
 
@@ -46,7 +48,7 @@ FRAME_FEATURES = 2 * MAX_OFFSET + 1
 # (cpu-small-xf-v1's first 2500 steps moved it by at most 0.06) and the model stays the single-frame one.
 LR_SCALE = {"temporal_gate.": 10.0, "tmix.": 3.0, "temporal.": 3.0, "temporal_embed.": 3.0, "mix_gate.": 10.0,
             "mix.": 3.0}
-TEMPORAL_KEYS = ("backbone", "inputs")
+TEMPORAL_KEYS = ("backbone", "inputs", "match")
 
 
 def temporal_layout(layouts: list) -> tuple[Layout, torch.Tensor]:
@@ -85,16 +87,19 @@ class CrossFrameRaNAD(nn.Module):
         self.config = config
         self.single = RaNAD(config, in_dim + FRAME_FEATURES, backend)
         c = config
-        if c.temporal_keys not in TEMPORAL_KEYS or (c.temporal_keys == "inputs" and c.output_mix):
+        self.input_keys = c.temporal_keys in ("inputs", "match")
+        self.matching = c.temporal_keys == "match"
+        if c.temporal_keys not in TEMPORAL_KEYS or (self.input_keys and c.output_mix) \
+                or (c.temporal_keys == "match" and c.temporal_radius != 0):
             raise ValueError(f"config {c.name!r}: temporal_keys {c.temporal_keys!r} (one of {TEMPORAL_KEYS}; "
-                             f"'inputs' has no per-frame features for an output mix)")
-        self.input_keys = c.temporal_keys == "inputs"
+                             f"input keys have no per-frame features for an output mix; 'match' has radius 0)")
         self.tmix = nn.ModuleList(TemporalMix(c.dim, c.heads, c.head_dim, c.temporal_radius, backend)
                                   for _ in range(0 if self.input_keys else c.unets))
         if self.input_keys:
             self.temporal_embed = nn.Sequential(nn.Linear(in_dim + FRAME_FEATURES, c.dim), nn.ReLU(),
                                                 nn.Linear(c.dim, c.dim))
-        self.temporal = nn.ModuleDict({name: KernelAttention(c.dim, r.heads, r.head_dim, c.temporal_radius, backend)
+        self.temporal = nn.ModuleDict({name: MatchKernel(c.dim) if c.temporal_keys == "match" else
+                                       KernelAttention(c.dim, r.heads, r.head_dim, c.temporal_radius, backend)
                                        for name, r in c.recon.items()})
         # per-bin share of the temporal result (a function of the features only, so the output stays linear in
         # the values); starts near 0: training begins from the single-frame behaviour
@@ -106,6 +111,9 @@ class CrossFrameRaNAD(nn.Module):
         for g in [*self.temporal_gate.values(), *(self.mix_gate.values() if c.output_mix else ())]:
             nn.init.zeros_(g.weight)
             nn.init.constant_(g.bias, -4.0)
+        if self.matching:   # open: the matching step starts mostly as the identity itself (matching.SELF_BONUS)
+            for g in self.temporal_gate.values():
+                nn.init.constant_(g.bias, 4.0)
 
     @classmethod
     def from_single(cls, single: RaNAD, config: ModelConfig, in_dim: int) -> "CrossFrameRaNAD":
@@ -172,6 +180,11 @@ class CrossFrameRaNAD(nn.Module):
         else:
             own = feats[centre]
         allf = torch.cat(feats)[gather] if len(frames) > 1 else None   # the window's keys, shared by every layer
+        if self.matching and len(frames) > 1:   # each centre bin's own row among the keys
+            rows = torch.empty_like(gather)
+            rows[gather] = torch.arange(gather.numel())
+            first = sum(f.layout.bins for f in frames[:centre])
+            own_rows = rows[first:first + c.layout.bins]
         for name, rec in self.single.recon.items():
             if name not in c.layers:
                 continue
@@ -185,7 +198,8 @@ class CrossFrameRaNAD(nn.Module):
             v = vals[centre]
             if len(frames) > 1:
                 allv = torch.cat(vals)[gather]
-                t = self.temporal[name](own, allf, c.layout.pixels, keys, allv)
+                mine = {"own": own_rows} if self.matching else {}
+                t = self.temporal[name](own, allf, c.layout.pixels, keys, allv, **mine)
                 g = torch.sigmoid(self.temporal_gate[name](own))
                 v = v + g * (t - v)
             out[name] = rec(own, c.layout, v)

@@ -1,0 +1,71 @@
+"""The matching temporal step (configs *-xm): each centre bin averages the window's bins at its own
+(motion-compensated) pixel, weighted by how well each candidate matches it.
+
+Why not the dot-product kernel of the other temporal steps: a kernel logit q·k cannot express a distance between
+a query and a key (-|q - k|² needs a per-key -|k|² term that no q·k has), and motion compensation moves bins by
+whole pixels, so a neighbour's bin at the same pixel is often a slightly different patch of texture, an edge's
+other side, or a refracted view that moved differently. A measured case (issue 25): constant-gated blends of the
+dot-product kernel's result made held-out glass shots 1.5-2.5x worse. Here each (query, candidate) pair is scored
+by a small MLP of the element-wise difference and product of their embeddings, so "same surface, same shading"
+and "different" are easy to tell apart.
+
+Still a softmax-weighted average of the values with weights that come from the embeddings only, so the output is
+linear in the values (AOVs reuse it, light groups still sum to the beauty). Radius 0 only: the candidates are the
+key bins of the query's own pixel (the query's own bin among them, as the window's key layout holds the centre's
+bins).
+"""
+
+from __future__ import annotations
+
+import torch
+from torch import nn
+
+from .layers import Layout
+
+PAIR_DIM = 16    # width of each bin's projection the pair scores compare
+SELF_BONUS = 3.0  # initial logit bonus of the query's own bin: the step starts mostly as the identity (0.8 of the
+                  # weight on the bin itself with ~5 candidates), so the scores train at full gradient from the start
+
+
+def pixel_pairs(q_pixels: torch.Tensor, keys: Layout) -> tuple[torch.Tensor, torch.Tensor]:
+    """Every (query row, key row) pair that shares a pixel: q_pixels [Nq, 2] (y, x) -> (qi [P], kj [P]), grouped
+    by query in ascending order."""
+    p = q_pixels[:, 0].long() * keys.width + q_pixels[:, 1].long()
+    start = keys.offsets[p]
+    n = keys.offsets[p + 1] - start
+    total = int(n.sum())
+    qi = torch.repeat_interleave(torch.arange(p.numel()), n, output_size=total)
+    first = torch.cumsum(n, 0) - n
+    within = torch.arange(total) - torch.repeat_interleave(first, n, output_size=total)
+    return qi, torch.repeat_interleave(start, n, output_size=total) + within
+
+
+def segment_softmax(logits: torch.Tensor, seg: torch.Tensor, segments: int) -> torch.Tensor:
+    """Softmax of logits [P] within each segment (seg [P] in 0..segments-1)."""
+    top = torch.full((segments,), float("-inf"), dtype=logits.dtype).scatter_reduce(0, seg, logits, "amax")
+    e = torch.exp(logits - top[seg])
+    return e / torch.zeros(segments, dtype=logits.dtype).index_add(0, seg, e)[seg]
+
+
+class MatchKernel(nn.Module):
+    """The kernel: pair logit = MLP(|a - b|, a * b) of the two bins' projected embeddings, plus a learned bonus
+    for the query's own bin."""
+
+    def __init__(self, dim: int, hidden: int = PAIR_DIM):
+        super().__init__()
+        self.proj = nn.Linear(dim, PAIR_DIM)
+        self.score = nn.Sequential(nn.Linear(2 * PAIR_DIM, hidden), nn.ReLU(), nn.Linear(hidden, 1))
+        self.self_bonus = nn.Parameter(torch.tensor(SELF_BONUS))
+
+    def forward(self, q_feat, k_feat, q_pixels, keys: Layout, values: torch.Tensor,
+                own: torch.Tensor | None = None) -> torch.Tensor:
+        """values [Nk, C] -> [Nq, C] (the signature of KernelAttention); own [Nq]: each query's own row among the
+        keys (None: no bonus)."""
+        qi, kj = pixel_pairs(q_pixels, keys)
+        a, b = self.proj(q_feat)[qi], self.proj(k_feat)[kj]
+        logits = self.score(torch.cat([(a - b).abs(), a * b], 1)).squeeze(1)
+        if own is not None:
+            logits = logits + self.self_bonus * (kj == own[qi]).to(logits.dtype)
+        w = segment_softmax(logits, qi, q_feat.shape[0])
+        return torch.zeros(q_feat.shape[0], values.shape[1], dtype=values.dtype).index_add(
+            0, qi, w.unsqueeze(1).to(values.dtype) * values[kj])

@@ -1,0 +1,94 @@
+"""The matching temporal step (matching.py): pairs are exactly the bins sharing a pixel, the weights are a
+softmax per query, the output is linear in the values, and a cross-frame model using it starts as its single-frame
+model and tiles like the whole frame."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+from ranad_core.denoise import denoise_window
+from ranad_core.exr import read_deep
+from ranad_core.model import RaNAD, feature_dim, get_config
+from ranad_core.model.config import ModelConfig
+from ranad_core.model.crossframe import CrossFrameRaNAD
+from ranad_core.model.layers import Layout
+from ranad_core.model.matching import MatchKernel, pixel_pairs, segment_softmax
+
+SHOT = Path(__file__).resolve().parents[1] / "examples" / "synth_shot"
+
+
+def random_layout(seed: int, h: int = 5, w: int = 7, max_bins: int = 4) -> Layout:
+    counts = torch.randint(0, max_bins + 1, (h * w,), generator=torch.Generator().manual_seed(seed))
+    return Layout.of(torch.cat([torch.zeros(1, dtype=torch.int64), torch.cumsum(counts, 0)]), h, w)
+
+
+def test_pairs_are_the_bins_of_the_query_pixel():
+    keys = random_layout(0)
+    queries = random_layout(1)
+    qi, kj = pixel_pairs(queries.pixels, keys)
+    got = sorted(zip(qi.tolist(), kj.tolist()))
+    kp = keys.pixels.tolist()
+    want = sorted((q, k) for q, qp in enumerate(queries.pixels.tolist()) for k in range(keys.bins) if kp[k] == qp)
+    assert got == want and len(want) > 0
+
+
+def test_segment_softmax_sums_to_one_per_segment():
+    seg = torch.tensor([0, 0, 0, 2, 2, 3])
+    logits = torch.tensor([1.0, 2.0, 3.0, 1000.0, -1000.0, 5.0])
+    w = segment_softmax(logits, seg, 4)
+    sums = torch.zeros(4).index_add(0, seg, w)
+    torch.testing.assert_close(sums[[0, 2, 3]], torch.ones(3))
+    torch.testing.assert_close(w[:3], torch.softmax(logits[:3], 0))
+    assert torch.isfinite(w).all()
+
+
+def test_match_kernel_is_linear_in_values_and_local_to_the_pixel():
+    torch.manual_seed(0)
+    keys = random_layout(2)
+    kern = MatchKernel(8)
+    for p in kern.parameters():
+        torch.nn.init.normal_(p, std=0.5)
+    qf, kf = torch.randn(keys.bins, 8), torch.randn(keys.bins, 8)
+    x, y = torch.randn(keys.bins, 3), torch.randn(keys.bins, 3)
+    out = kern(qf, kf, keys.pixels, keys, 2 * x - 3 * y)
+    torch.testing.assert_close(out, 2 * kern(qf, kf, keys.pixels, keys, x) - 3 * kern(qf, kf, keys.pixels, keys, y))
+    # a constant layer comes back unchanged (a convex combination), and a key value in another pixel has no say
+    torch.testing.assert_close(kern(qf, kf, keys.pixels, keys, torch.ones(keys.bins, 2)), torch.ones(keys.bins, 2))
+    b = 0
+    changed = x.clone()
+    changed[b] += 100
+    same_pixel = (keys.pixels == keys.pixels[b]).all(1)
+    diff = (kern(qf, kf, keys.pixels, keys, changed) - kern(qf, kf, keys.pixels, keys, x)).abs().amax(1)
+    assert (diff[~same_pixel] == 0).all() and (diff[same_pixel] > 0).all()
+
+
+def matching_config() -> ModelConfig:
+    return ModelConfig(**{**get_config("cpu-small-xf").__dict__, "name": "xm", "temporal_keys": "match",
+                          "temporal_radius": 0.0})
+
+
+def test_a_matching_model_is_its_single_frame_model_when_shut_and_tiles_exactly():
+    torch.manual_seed(0)
+    single = RaNAD(get_config("cpu-small"), feature_dim()).eval()
+    model = CrossFrameRaNAD.from_single(single, matching_config(), feature_dim()).eval()
+    frames = [read_deep(SHOT / f"noisy_spp16.{i:04d}.exr") for i in range(3)]
+    one = denoise_window(single, frames[1:2], 0).image.values
+    for g in model.temporal_gate.values():
+        torch.nn.init.constant_(g.bias, -1e4)
+    np.testing.assert_allclose(denoise_window(model, frames, 1).image.values, one, rtol=1e-6, atol=1e-7)
+    for g in model.temporal_gate.values():
+        torch.nn.init.constant_(g.bias, 0.0)
+    for t in model.temporal.values():         # all the weight on each bin's own row: the identity step
+        torch.nn.init.constant_(t.self_bonus, 1e4)
+    np.testing.assert_allclose(denoise_window(model, frames, 1).image.values, one, rtol=1e-5, atol=1e-6)
+    for t in model.temporal.values():
+        torch.nn.init.constant_(t.self_bonus, 0.0)
+    whole = denoise_window(model, frames, 1).image.values
+    assert np.abs(whole - one).max() > 1e-3
+    np.testing.assert_allclose(denoise_window(model, frames, 1, tile=16).image.values, whole, rtol=1e-4, atol=1e-5)
+    with pytest.raises(ValueError):                          # matching has radius 0 only
+        CrossFrameRaNAD(ModelConfig(**{**matching_config().__dict__, "temporal_radius": 1.0}), feature_dim())
