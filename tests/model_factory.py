@@ -12,3 +12,9 @@ def input_keys_config() -> ModelConfig:
 def demodulating(config: ModelConfig) -> ModelConfig:
     """`config` with albedo demodulation of the diffuse layer (reconstruction.demodulated)."""
     return ModelConfig(**{**config.__dict__, "name": config.name + "-d", "demodulate": True})
+
+
+def matching_config(guard: bool = False) -> ModelConfig:
+    """cpu-small-xf with the matching temporal step (the *-xm configs; *-xg with the guard), on log1p features."""
+    return ModelConfig(**{**get_config("cpu-small-xf").__dict__, "name": "xg" if guard else "xm",
+                          "temporal_keys": "match", "temporal_radius": 0.0, "temporal_guard": guard})

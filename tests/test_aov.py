@@ -12,7 +12,7 @@ import pytest
 import torch
 from click.testing import CliRunner
 
-from model_factory import demodulating, input_keys_config
+from model_factory import demodulating, input_keys_config, matching_config
 from ranad_cli.main import cli
 from ranad_core.aov import aov_layers, denoise_aovs, kernel_rule
 from ranad_core.channels import detect
@@ -59,8 +59,11 @@ def models():
     demod.load_state_dict(single.state_dict())
     demod_keyed = CrossFrameRaNAD(demodulating(input_keys_config()), feature_dim()).eval()
     demod_keyed.load_state_dict(keyed.state_dict())
+    guarded = CrossFrameRaNAD.from_single(demod, demodulating(matching_config(guard=True)), feature_dim()).eval()
+    for t in guarded.temporal.values():         # spread the matching step's weights over the candidates
+        torch.nn.init.constant_(t.self_bonus, 0.0)
     return {"single": single, "cross": cross, "output-mix": mixed, "input-keys": keyed, "demodulated": demod,
-            "demodulated-input-keys": demod_keyed}
+            "demodulated-input-keys": demod_keyed, "guarded-matching": guarded}
 
 
 def test_layers_and_rules():
@@ -72,7 +75,7 @@ def test_layers_and_rules():
 
 
 @pytest.mark.parametrize("kind", ["single", "cross", "output-mix", "input-keys", "demodulated",
-                                  "demodulated-input-keys"])
+                                  "demodulated-input-keys", "guarded-matching"])
 def test_light_groups_sum_to_the_denoised_beauty(kind):
     model = models()[kind]
     frames = [exact_groups(read_deep(SHOT / f"noisy_spp16.{i:04d}.exr")) for i in range(3)]
@@ -127,6 +130,12 @@ def test_aov_command_through_the_cache_of_a_demodulating_model(tmp_path):
     """A model that divides the diffuse layer by the albedo: `ranad aov` rebuilds the same modulation from the
     files, so the light groups still sum to the denoised beauty."""
     denoise_then_aov(models()["demodulated-input-keys"], tmp_path)
+
+
+def test_aov_command_through_the_cache_of_a_guarded_matching_model(tmp_path):
+    """The matching step with its guard: the guides travel in the cached embeddings, so `ranad aov` rebuilds the
+    same allowed pairs and the light groups still sum to the denoised beauty."""
+    denoise_then_aov(models()["guarded-matching"], tmp_path)
 
 
 def test_aov_command_through_the_cache_and_refusals(tmp_path):

@@ -4,19 +4,25 @@ model and tiles like the whole frame."""
 
 from __future__ import annotations
 
+import copy
+import math
 from pathlib import Path
 
 import numpy as np
 import pytest
 import torch
 
+from model_factory import matching_config
 from ranad_core.denoise import denoise_window
 from ranad_core.exr import read_deep
-from ranad_core.model import RaNAD, feature_dim, get_config
+from ranad_core.model import RaNAD, feature_dim, get_config, prepare
 from ranad_core.model.config import ModelConfig
 from ranad_core.model.crossframe import CrossFrameRaNAD
+from ranad_core.model.inputs import guides
 from ranad_core.model.layers import Layout
-from ranad_core.model.matching import MatchKernel, pixel_pairs, segment_softmax
+from ranad_core.model.matching import (GUARD, GUIDE_WIDTH, PRIOR, MatchKernel, consistent, pixel_pairs,
+                                      segment_softmax)
+from ranad_core.motion import compensate
 
 SHOT = Path(__file__).resolve().parents[1] / "examples" / "synth_shot"
 
@@ -66,11 +72,6 @@ def test_match_kernel_is_linear_in_values_and_local_to_the_pixel():
     assert (diff[~same_pixel] == 0).all() and (diff[same_pixel] > 0).all()
 
 
-def matching_config() -> ModelConfig:
-    return ModelConfig(**{**get_config("cpu-small-xf").__dict__, "name": "xm", "temporal_keys": "match",
-                          "temporal_radius": 0.0})
-
-
 def test_a_matching_model_is_its_single_frame_model_when_shut_and_tiles_exactly():
     torch.manual_seed(0)
     single = RaNAD(get_config("cpu-small"), feature_dim()).eval()
@@ -92,3 +93,63 @@ def test_a_matching_model_is_its_single_frame_model_when_shut_and_tiles_exactly(
     np.testing.assert_allclose(denoise_window(model, frames, 1, tile=16).image.values, whole, rtol=1e-4, atol=1e-5)
     with pytest.raises(ValueError):                          # matching has radius 0 only
         CrossFrameRaNAD(ModelConfig(**{**matching_config().__dict__, "temporal_radius": 1.0}), feature_dim())
+    with pytest.raises(ValueError):                          # and only matching has a guard
+        CrossFrameRaNAD(ModelConfig(**{**get_config("cpu-small-xf").__dict__, "temporal_guard": True}),
+                        feature_dim())
+
+
+def test_consistent_checks_every_guide_against_its_tolerance():
+    a = torch.rand(1, GUIDE_WIDTH)
+    a[0, 10] = 0
+    assert consistent(a, a.clone()).item()
+    for _, cols, tol in GUARD:
+        for step, agree in ((0.9 * tol, True), (1.1 * tol, False)):
+            b = a.clone()
+            b[0, cols.start] += step
+            assert consistent(a, b).item() is agree, (cols, step)
+    # the prior as a ratio: 15% apart agree, 30% do not, whatever the level; far below the floor all agree
+    for level in (0.5, 5.0, 50.0):
+        for ratio, agree in ((1.15, True), (1.3, False)):
+            b, c = a.clone(), a.clone()
+            b[0, PRIOR] = math.log1p(level)
+            c[0, PRIOR] = math.log1p(level * ratio)
+            assert consistent(b, c).item() is agree, (level, ratio)
+    b, c = a.clone(), a.clone()
+    b[0, PRIOR], c[0, PRIOR] = 0.0, math.log1p(1e-4)
+    assert consistent(b, c).item()
+
+
+def guarded_window():
+    """A guarded matching model (gates open) and the bundled shot's window as model inputs."""
+    torch.manual_seed(0)
+    single = RaNAD(get_config("cpu-small"), feature_dim()).eval()
+    model = CrossFrameRaNAD.from_single(single, matching_config(guard=True), feature_dim()).eval()
+    for t in model.temporal.values():
+        torch.nn.init.constant_(t.self_bonus, 0.0)
+    frames = [read_deep(SHOT / f"noisy_spp16.{i:04d}.exr").crop((0, 0, 23, 23)) for i in range(3)]
+    window = [prepare(f.sorted()[0]) for f in compensate(frames, 1)[0]]
+    return single, model, window
+
+
+def test_the_guard_keeps_out_neighbours_that_show_something_else():
+    """Neighbours whose bins are the centre's with other noisy values are used; the same neighbours with another
+    albedo are not (the result is the single-frame model's, exactly), nor are the centre's other bins."""
+    single, model, window = guarded_window()
+    centre = window[1]
+    with torch.no_grad():
+        alone = single.reconstruct(single.embeddings(centre), centre)
+
+        def run(neighbour):
+            w = [neighbour, centre, neighbour]
+            return model.reconstruct(model.embeddings(w, 1), w, 1)
+        noisier = copy.copy(centre)
+        noisier.layers = {k: v * 2 for k, v in centre.layers.items()}
+        used = run(noisier)
+        assert (used["diffuse"] - alone["diffuse"]).abs().max() > 1e-3
+        other = copy.copy(noisier)
+        other.features = centre.features.clone()
+        other.features[:, 9:12] += 0.5                       # the albedo columns (inputs.GUIDE_COLUMNS)
+        assert torch.equal(guides(other.features, "log1p")[:, 1:4], guides(centre.features, "log1p")[:, 1:4] + 0.5)
+        kept_out = run(other)
+        for name in alone:
+            torch.testing.assert_close(kept_out[name], alone[name], rtol=1e-5, atol=1e-6)

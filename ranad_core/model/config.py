@@ -41,6 +41,8 @@ class ModelConfig:
     temporal_keys: str = "backbone"
     # divide the diffuse layer by its albedo guide before the kernels and multiply back after (reconstruction.py)
     demodulate: bool = False
+    # matching temporal step: neighbours' bins take part only where their guides agree with the bin's (matching.GUARD)
+    temporal_guard: bool = False
 
     def to_dict(self) -> dict:
         d = asdict(self)
@@ -107,6 +109,11 @@ CONFIGS["cpu-small-pd-xk"] = ModelConfig(**{**CONFIGS["cpu-small-p-xk0"].__dict_
 # difference from the query's (matching.py) rather than a dot product: misaligned bins can be told apart (issue 25)
 CONFIGS["cpu-small-pd-xm"] = ModelConfig(**{**CONFIGS["cpu-small-pd-xk"].__dict__, "name": "cpu-small-pd-xm",
                                            "temporal_keys": "match"})
+
+# cpu-small-pd-xm with the guard: a neighbour's bin counts only where depth, albedo, normal and flat prior agree
+# with the bin's, rules that hold on scene families the scores never saw (issue 25)
+CONFIGS["cpu-small-pd-xg"] = ModelConfig(**{**CONFIGS["cpu-small-pd-xm"].__dict__, "name": "cpu-small-pd-xg",
+                                           "temporal_guard": True})
 
 
 def get_config(name: str) -> ModelConfig:

@@ -33,9 +33,9 @@ from torch import nn
 
 from ..rana import concat_frames
 from .config import ModelConfig
-from .inputs import ModelInputs
+from .inputs import ModelInputs, guides
 from .layers import Layout, MultiHeadRaNA
-from .matching import MatchKernel
+from .matching import GUIDE_WIDTH, MatchKernel, consistent, pixel_pairs
 from .ranad import RaNAD
 from .reconstruction import KernelAttention, per_channel
 
@@ -90,9 +90,11 @@ class CrossFrameRaNAD(nn.Module):
         self.input_keys = c.temporal_keys in ("inputs", "match")
         self.matching = c.temporal_keys == "match"
         if c.temporal_keys not in TEMPORAL_KEYS or (self.input_keys and c.output_mix) \
-                or (c.temporal_keys == "match" and c.temporal_radius != 0):
+                or (c.temporal_keys == "match" and c.temporal_radius != 0) \
+                or (c.temporal_guard and c.temporal_keys != "match"):
             raise ValueError(f"config {c.name!r}: temporal_keys {c.temporal_keys!r} (one of {TEMPORAL_KEYS}; "
-                             f"input keys have no per-frame features for an output mix; 'match' has radius 0)")
+                             f"input keys have no per-frame features for an output mix; 'match' has radius 0 and "
+                             f"is the only one with a guard)")
         self.tmix = nn.ModuleList(TemporalMix(c.dim, c.heads, c.head_dim, c.temporal_radius, backend)
                                   for _ in range(0 if self.input_keys else c.unets))
         if self.input_keys:
@@ -151,6 +153,8 @@ class CrossFrameRaNAD(nn.Module):
             if len(frames) == 1:
                 return [own]
             feats = [self.temporal_embed(with_frame_id(f, i - centre)) for i, f in enumerate(frames)]
+            if self.config.temporal_guard:   # the guides travel in the embeddings, so the AOV cache keeps them
+                feats = [torch.cat([e, guides(f.features, self.config.features)], 1) for e, f in zip(feats, frames)]
             feats[centre] = torch.cat([own, feats[centre]], 1)
             return feats
         layouts = [f.layout for f in frames]
@@ -164,8 +168,30 @@ class CrossFrameRaNAD(nn.Module):
 
     def embedding_width(self, is_centre: bool, frames: int) -> int:
         """Width of a window frame's embedding (see embeddings): the centre's [backbone | keys] with input keys in
-        a window of several frames, the model's dim otherwise."""
-        return 2 * self.config.dim if self.input_keys and is_centre and frames > 1 else self.config.dim
+        a window of several frames, the model's dim otherwise; plus the guides (temporal_guard, several frames)."""
+        guard = GUIDE_WIDTH if self.config.temporal_guard and frames > 1 else 0
+        return (2 * self.config.dim if self.input_keys and is_centre and frames > 1 else self.config.dim) + guard
+
+    def _match_args(self, feats: list, frames: list, centre: int, keys: Layout, gather: torch.Tensor) -> dict:
+        """The matching step's arguments shared by every layer: each centre bin's own row among the keys, the
+        pairs, which pairs are allowed (with the guard: the bin itself, and neighbours' bins whose guides agree;
+        other bins of the centre frame, which are other surfaces of the pixel, never), and the keys without their
+        guides ("feats")."""
+        c = frames[centre]
+        rows = torch.empty_like(gather)
+        rows[gather] = torch.arange(gather.numel())
+        sizes = torch.tensor([f.layout.bins for f in frames])
+        first = int(sizes[:centre].sum())
+        own_rows = rows[first:first + c.layout.bins]
+        pairs = pixel_pairs(c.layout.pixels, keys)
+        out = {"own": own_rows, "pairs": pairs, "allowed": None, "feats": feats}
+        if self.config.temporal_guard:
+            allg = torch.cat([f[:, -GUIDE_WIDTH:] for f in feats])[gather]
+            out["feats"] = [f[:, :-GUIDE_WIDTH] for f in feats]
+            frame = torch.bucketize(gather, torch.cumsum(sizes, 0), right=True)
+            qi, kj = pairs
+            out["allowed"] = (kj == own_rows[qi]) | ((frame[kj] != centre) & consistent(allg[own_rows][qi], allg[kj]))
+        return out
 
     def reconstruct(self, feats: list, frames: list, centre: int, values: dict | None = None) -> dict:
         """Denoised layers of the centre frame; `values` (name -> per-frame [N_f, C] list) replaces the noisy
@@ -179,12 +205,11 @@ class CrossFrameRaNAD(nn.Module):
             own, feats[centre] = feats[centre][:, :dim], feats[centre][:, dim:]
         else:
             own = feats[centre]
+        match = {}
+        if self.matching and len(frames) > 1:
+            match = self._match_args(feats, frames, centre, keys, gather)
+            feats = match.pop("feats")
         allf = torch.cat(feats)[gather] if len(frames) > 1 else None   # the window's keys, shared by every layer
-        if self.matching and len(frames) > 1:   # each centre bin's own row among the keys
-            rows = torch.empty_like(gather)
-            rows[gather] = torch.arange(gather.numel())
-            first = sum(f.layout.bins for f in frames[:centre])
-            own_rows = rows[first:first + c.layout.bins]
         for name, rec in self.single.recon.items():
             if name not in c.layers:
                 continue
@@ -198,8 +223,10 @@ class CrossFrameRaNAD(nn.Module):
             v = vals[centre]
             if len(frames) > 1:
                 allv = torch.cat(vals)[gather]
-                mine = {"own": own_rows} if self.matching else {}
-                t = self.temporal[name](own, allf, c.layout.pixels, keys, allv, **mine)
+                # the matching step compares the centre's own keys with the window's; the others query with the
+                # backbone features
+                query = feats[centre] if self.matching else own
+                t = self.temporal[name](query, allf, c.layout.pixels, keys, allv, **match)
                 g = torch.sigmoid(self.temporal_gate[name](own))
                 v = v + g * (t - v)
             out[name] = rec(own, c.layout, v)

@@ -53,6 +53,22 @@ class ModelInputs:
 FEATURE_SETS = ("log1p", "prior")
 
 
+# columns of prepare()'s features that describe what a bin shows rather than its noise: standardised log depth,
+# albedo, normal and, with "prior" features, the flat prior of its pixel (the matching temporal step compares them);
+# and the bin's noisy radiance, of which the guides keep only whether it is exactly black
+GUIDE_COLUMNS = {"depth": slice(8, 9), "albedo": slice(9, 12), "normal": slice(12, 15), "prior": slice(15, 18),
+                 "radiance": slice(0, 6)}
+
+
+def guides(features: torch.Tensor, feature_set: str) -> torch.Tensor:
+    """[N, 11] the guides of `features`: depth, albedo, normal, prior (log1p of the exposure-normalised flat prior;
+    zero without "prior" features) and 1 where the bin's noisy radiance is exactly black."""
+    cols = [features[:, GUIDE_COLUMNS[k]] for k in ("depth", "albedo", "normal")]
+    prior = features[:, GUIDE_COLUMNS["prior"]] if feature_set == "prior" else features.new_zeros(len(features), 3)
+    black = (features[:, GUIDE_COLUMNS["radiance"]] == 0).all(1, keepdim=True).to(features.dtype)
+    return torch.cat([*cols, prior, black], 1)
+
+
 def feature_dim(features: str = "log1p") -> int:
     base = 2 * 3 + 2 + 1 + 3 + 3 + 4 * len(PERIODS) + 2 * BIN_FREQS + 1
     return base + (6 if features == "prior" else 0)

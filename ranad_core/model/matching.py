@@ -47,6 +47,30 @@ def segment_softmax(logits: torch.Tensor, seg: torch.Tensor, segments: int) -> t
     return e / torch.zeros(segments, dtype=logits.dtype).index_add(0, seg, e)[seg]
 
 
+# The guard (configs with `temporal_guard`): a neighbour's bin is a candidate only where it shows what the query
+# bin shows: every guide within its tolerance (max abs difference over the group's columns of inputs.guides: the
+# standardised log depth, albedo and normal; the flat prior compared as a ratio, log((a + floor) / (b + floor)) of
+# the exposure-normalised prior, catching shading that changed, refraction and misaligned texture; and blackness:
+# a bin whose samples were all black takes nothing from bins that were not, as metrics such as HDR-FLIP see even
+# 1e-7 of light leaked onto exact black). Rules, not learned scores: they mean the same on scenes unlike the
+# training ones, where the learned scores alone blended what they should not (issue 25).
+GUARD = (("depth", slice(0, 1), 0.25), ("albedo", slice(1, 4), 0.1), ("normal", slice(4, 7), 0.25),
+         ("black", slice(10, 11), 0.5))
+PRIOR = slice(7, 10)
+PRIOR_TOLERANCE = 0.2     # |log ratio| of the priors: about 20%
+PRIOR_FLOOR = 0.01        # in units of the frame's exposure scale: below it, differences count as equal
+GUIDE_WIDTH = 11
+
+
+def consistent(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
+    """[P] whether guide rows a [P, 11] and b [P, 11] agree within GUARD and PRIOR_TOLERANCE."""
+    ok = torch.ones(a.shape[0], dtype=torch.bool)
+    for _, cols, tol in GUARD:
+        ok &= (a[:, cols] - b[:, cols]).abs().amax(1) <= tol
+    pa, pb = (torch.expm1(x[:, PRIOR].clamp(min=0)) + PRIOR_FLOOR for x in (a, b))
+    return ok & (torch.log(pa / pb).abs().amax(1) <= PRIOR_TOLERANCE)
+
+
 class MatchKernel(nn.Module):
     """The kernel: pair logit = MLP(|a - b|, a * b) of the two bins' projected embeddings, plus a learned bonus
     for the query's own bin."""
@@ -58,14 +82,17 @@ class MatchKernel(nn.Module):
         self.self_bonus = nn.Parameter(torch.tensor(SELF_BONUS))
 
     def forward(self, q_feat, k_feat, q_pixels, keys: Layout, values: torch.Tensor,
-                own: torch.Tensor | None = None) -> torch.Tensor:
+                own: torch.Tensor | None = None, pairs=None, allowed: torch.Tensor | None = None) -> torch.Tensor:
         """values [Nk, C] -> [Nq, C] (the signature of KernelAttention); own [Nq]: each query's own row among the
-        keys (None: no bonus)."""
-        qi, kj = pixel_pairs(q_pixels, keys)
+        keys (None: no bonus); pairs: pixel_pairs(q_pixels, keys) when the caller has them; allowed [P]: which
+        pairs may take part (None: all; each query's own bin must be allowed)."""
+        qi, kj = pixel_pairs(q_pixels, keys) if pairs is None else pairs
         a, b = self.proj(q_feat)[qi], self.proj(k_feat)[kj]
         logits = self.score(torch.cat([(a - b).abs(), a * b], 1)).squeeze(1)
         if own is not None:
             logits = logits + self.self_bonus * (kj == own[qi]).to(logits.dtype)
+        if allowed is not None:
+            logits = logits.masked_fill(~allowed, float("-inf"))
         w = segment_softmax(logits, qi, q_feat.shape[0])
         return torch.zeros(q_feat.shape[0], values.shape[1], dtype=values.dtype).index_add(
             0, qi, w.unsqueeze(1).to(values.dtype) * values[kj])
