@@ -14,12 +14,13 @@
   that the spatial kernels weigh differently in each window: this targets flicker directly. Still a kernel over
   noisy values (linear in them), so AOVs reuse it.
 
-With `temporal_keys="inputs"` (configs *-xk) or `"match"` (configs *-xm, matching.py: the temporal step scores each
-candidate bin by an MLP of its difference from the query rather than a dot product) there are no T-Mix blocks: only the centre frame runs the backbone,
-so its features, and with a frozen spatial part its whole spatial reconstruction, are the single-frame model's
-whatever the neighbours hold, and the temporal step's keys are a small MLP of each window bin's own inputs (colour,
-prior, guides, depth, frame offset): enough to tell whether a neighbour's bin shows the same surface, at the cost
-of one backbone pass per window instead of one per frame.
+With `temporal_keys="inputs"` (configs *-xk) or `"match"` (configs *-xm and, guarded, *-xg; matching.py: the
+temporal step scores each candidate bin by an MLP of its difference from the query rather than a dot product) there
+are no T-Mix blocks: only the centre frame runs the backbone, so its features, and with a frozen spatial part its
+whole spatial reconstruction, are the single-frame model's whatever the neighbours hold, and the temporal step's
+keys are a small MLP of each window bin's own inputs (colour, prior, guides, depth, frame offset): enough to tell
+whether a neighbour's bin shows the same surface, at the cost of one backbone pass per window instead of one per
+frame.
 
 A window of one frame skips the T-Mix blocks and the temporal step, so a cross-frame model with one frame is the
 single-frame model it was initialised from (`from_single`): the new one-hot inputs start with zero weights and
