@@ -175,9 +175,9 @@ class CrossFrameRaNAD(nn.Module):
 
     def _match_args(self, feats: list, frames: list, centre: int, keys: Layout, gather: torch.Tensor) -> dict:
         """The matching step's arguments shared by every layer: each centre bin's own row among the keys, the
-        pairs, which pairs are allowed (with the guard: the bin itself, and neighbours' bins whose guides agree;
-        other bins of the centre frame, which are other surfaces of the pixel, never), and the keys without their
-        guides ("feats")."""
+        pairs that take part (with the guard only the bin itself and neighbours' bins whose guides agree; other bins
+        of the centre frame, which are other surfaces of the pixel, never: pairs left out rather than masked, so
+        the pair scores run on few), and the keys without their guides ("feats")."""
         c = frames[centre]
         rows = torch.empty_like(gather)
         rows[gather] = torch.arange(gather.numel())
@@ -185,13 +185,14 @@ class CrossFrameRaNAD(nn.Module):
         first = int(sizes[:centre].sum())
         own_rows = rows[first:first + c.layout.bins]
         pairs = pixel_pairs(c.layout.pixels, keys)
-        out = {"own": own_rows, "pairs": pairs, "allowed": None, "feats": feats}
+        out = {"own": own_rows, "pairs": pairs, "feats": feats}
         if self.config.temporal_guard:
             allg = torch.cat([f[:, -GUIDE_WIDTH:] for f in feats])[gather]
             out["feats"] = [f[:, :-GUIDE_WIDTH] for f in feats]
             frame = torch.bucketize(gather, torch.cumsum(sizes, 0), right=True)
             qi, kj = pairs
-            out["allowed"] = (kj == own_rows[qi]) | ((frame[kj] != centre) & consistent(allg[own_rows][qi], allg[kj]))
+            ok = (kj == own_rows[qi]) | ((frame[kj] != centre) & consistent(allg[own_rows][qi], allg[kj]))
+            out["pairs"] = (qi[ok], kj[ok])
         return out
 
     def reconstruct(self, feats: list, frames: list, centre: int, values: dict | None = None) -> dict:

@@ -82,17 +82,15 @@ class MatchKernel(nn.Module):
         self.self_bonus = nn.Parameter(torch.tensor(SELF_BONUS))
 
     def forward(self, q_feat, k_feat, q_pixels, keys: Layout, values: torch.Tensor,
-                own: torch.Tensor | None = None, pairs=None, allowed: torch.Tensor | None = None) -> torch.Tensor:
+                own: torch.Tensor | None = None, pairs=None) -> torch.Tensor:
         """values [Nk, C] -> [Nq, C] (the signature of KernelAttention); own [Nq]: each query's own row among the
-        keys (None: no bonus); pairs: pixel_pairs(q_pixels, keys) when the caller has them; allowed [P]: which
-        pairs may take part (None: all; each query's own bin must be allowed)."""
+        keys (None: no bonus); pairs: the (qi, kj) that take part, grouped by query, each query's own bin among
+        them (None: pixel_pairs(q_pixels, keys), all of them)."""
         qi, kj = pixel_pairs(q_pixels, keys) if pairs is None else pairs
         a, b = self.proj(q_feat)[qi], self.proj(k_feat)[kj]
         logits = self.score(torch.cat([(a - b).abs(), a * b], 1)).squeeze(1)
         if own is not None:
             logits = logits + self.self_bonus * (kj == own[qi]).to(logits.dtype)
-        if allowed is not None:
-            logits = logits.masked_fill(~allowed, float("-inf"))
         w = segment_softmax(logits, qi, q_feat.shape[0])
         return torch.zeros(q_feat.shape[0], values.shape[1], dtype=values.dtype).index_add(
             0, qi, w.unsqueeze(1).to(values.dtype) * values[kj])
