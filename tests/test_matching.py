@@ -18,10 +18,9 @@ from ranad_core.exr import read_deep
 from ranad_core.model import RaNAD, feature_dim, get_config, prepare
 from ranad_core.model.config import ModelConfig
 from ranad_core.model.crossframe import CrossFrameRaNAD
-from ranad_core.model.inputs import guides
+from ranad_core.model.inputs import GUIDE_COLUMNS, GUIDE_LAYOUT, GUIDE_WIDTH, guides
 from ranad_core.model.layers import Layout
-from ranad_core.model.matching import (GUARD, GUIDE_WIDTH, PRIOR, MatchKernel, consistent, pixel_pairs,
-                                      segment_softmax)
+from ranad_core.model.matching import GUARD, MatchKernel, consistent, pixel_pairs, segment_softmax
 from ranad_core.motion import compensate
 
 SHOT = Path(__file__).resolve().parents[1] / "examples" / "synth_shot"
@@ -100,9 +99,11 @@ def test_a_matching_model_is_its_single_frame_model_when_shut_and_tiles_exactly(
 
 def test_consistent_checks_every_guide_against_its_tolerance():
     a = torch.rand(1, GUIDE_WIDTH)
-    a[0, 10] = 0
+    a[0, GUIDE_LAYOUT["black"]] = 0
     assert consistent(a, a.clone()).item()
-    for _, cols, tol in GUARD:
+    prior = GUIDE_LAYOUT["prior"]
+    for name, tol in GUARD.items():
+        cols = GUIDE_LAYOUT[name]
         for step, agree in ((0.9 * tol, True), (1.1 * tol, False)):
             b = a.clone()
             b[0, cols.start] += step
@@ -111,11 +112,11 @@ def test_consistent_checks_every_guide_against_its_tolerance():
     for level in (0.5, 5.0, 50.0):
         for ratio, agree in ((1.15, True), (1.3, False)):
             b, c = a.clone(), a.clone()
-            b[0, PRIOR] = math.log1p(level)
-            c[0, PRIOR] = math.log1p(level * ratio)
+            b[0, prior] = math.log1p(level)
+            c[0, prior] = math.log1p(level * ratio)
             assert consistent(b, c).item() is agree, (level, ratio)
     b, c = a.clone(), a.clone()
-    b[0, PRIOR], c[0, PRIOR] = 0.0, math.log1p(1e-4)
+    b[0, prior], c[0, prior] = 0.0, math.log1p(1e-4)
     assert consistent(b, c).item()
 
 
@@ -148,8 +149,10 @@ def test_the_guard_keeps_out_neighbours_that_show_something_else():
         assert (used["diffuse"] - alone["diffuse"]).abs().max() > 1e-3
         other = copy.copy(noisier)
         other.features = centre.features.clone()
-        other.features[:, 9:12] += 0.5                       # the albedo columns (inputs.GUIDE_COLUMNS)
-        assert torch.equal(guides(other.features, "log1p")[:, 1:4], guides(centre.features, "log1p")[:, 1:4] + 0.5)
+        other.features[:, GUIDE_COLUMNS["albedo"]] += 0.5
+        albedo = GUIDE_LAYOUT["albedo"]
+        assert torch.equal(guides(other.features, "log1p")[:, albedo],
+                           guides(centre.features, "log1p")[:, albedo] + 0.5)
         kept_out = run(other)
         for name in alone:
             torch.testing.assert_close(kept_out[name], alone[name], rtol=1e-5, atol=1e-6)

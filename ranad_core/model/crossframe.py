@@ -34,9 +34,9 @@ from torch import nn
 
 from ..rana import concat_frames
 from .config import ModelConfig
-from .inputs import ModelInputs, guides
+from .inputs import GUIDE_WIDTH, ModelInputs, guides
 from .layers import Layout, MultiHeadRaNA
-from .matching import GUIDE_WIDTH, MatchKernel, consistent, pixel_pairs
+from .matching import MatchKernel, consistent, pixel_pairs
 from .ranad import RaNAD
 from .reconstruction import KernelAttention, per_channel
 
@@ -52,10 +52,11 @@ LR_SCALE = {"temporal_gate.": 10.0, "tmix.": 3.0, "temporal.": 3.0, "temporal_em
 TEMPORAL_KEYS = ("backbone", "inputs", "match")
 
 
-def temporal_layout(layouts: list) -> tuple[Layout, torch.Tensor]:
-    """(the window's bins per pixel frame after frame as one key layout, gather rows into cat(frames))."""
-    offsets, gather, _ = concat_frames([l.offsets for l in layouts])
-    return Layout.of(offsets, layouts[0].height, layouts[0].width), gather
+def temporal_layout(layouts: list) -> tuple[Layout, torch.Tensor, torch.Tensor]:
+    """(the window's bins per pixel frame after frame as one key layout, gather rows into cat(frames), the frame of
+    each key row)."""
+    offsets, gather, frame = concat_frames([l.offsets for l in layouts])
+    return Layout.of(offsets, layouts[0].height, layouts[0].width), gather, frame
 
 
 def with_frame_id(inputs: ModelInputs, offset: int) -> torch.Tensor:
@@ -91,8 +92,7 @@ class CrossFrameRaNAD(nn.Module):
         self.input_keys = c.temporal_keys in ("inputs", "match")
         self.matching = c.temporal_keys == "match"
         if c.temporal_keys not in TEMPORAL_KEYS or (self.input_keys and c.output_mix) \
-                or (c.temporal_keys == "match" and c.temporal_radius != 0) \
-                or (c.temporal_guard and c.temporal_keys != "match"):
+                or (self.matching and c.temporal_radius != 0) or (c.temporal_guard and not self.matching):
             raise ValueError(f"config {c.name!r}: temporal_keys {c.temporal_keys!r} (one of {TEMPORAL_KEYS}; "
                              f"input keys have no per-frame features for an output mix; 'match' has radius 0 and "
                              f"is the only one with a guard)")
@@ -101,7 +101,7 @@ class CrossFrameRaNAD(nn.Module):
         if self.input_keys:
             self.temporal_embed = nn.Sequential(nn.Linear(in_dim + FRAME_FEATURES, c.dim), nn.ReLU(),
                                                 nn.Linear(c.dim, c.dim))
-        self.temporal = nn.ModuleDict({name: MatchKernel(c.dim) if c.temporal_keys == "match" else
+        self.temporal = nn.ModuleDict({name: MatchKernel(c.dim) if self.matching else
                                        KernelAttention(c.dim, r.heads, r.head_dim, c.temporal_radius, backend)
                                        for name, r in c.recon.items()})
         # per-bin share of the temporal result (a function of the features only, so the output stays linear in
@@ -160,7 +160,7 @@ class CrossFrameRaNAD(nn.Module):
             return feats
         layouts = [f.layout for f in frames]
         feats = [self.single.embed(with_frame_id(f, i - centre)) for i, f in enumerate(frames)]
-        keys, gather = temporal_layout(layouts) if len(frames) > 1 else (None, None)
+        keys, gather, _ = temporal_layout(layouts) if len(frames) > 1 else (None, None, None)
         for k, unet in enumerate(self.single.backbone.unets):
             feats = [unet(f, l) for f, l in zip(feats, layouts)]
             if len(frames) > 1:
@@ -173,7 +173,8 @@ class CrossFrameRaNAD(nn.Module):
         guard = GUIDE_WIDTH if self.config.temporal_guard and frames > 1 else 0
         return (2 * self.config.dim if self.input_keys and is_centre and frames > 1 else self.config.dim) + guard
 
-    def _match_args(self, feats: list, frames: list, centre: int, keys: Layout, gather: torch.Tensor) -> dict:
+    def _match_args(self, feats: list, frames: list, centre: int, keys: Layout, gather: torch.Tensor,
+                    frame: torch.Tensor) -> dict:
         """The matching step's arguments shared by every layer: each centre bin's own row among the keys, the
         pairs that take part (with the guard only the bin itself and neighbours' bins whose guides agree; other bins
         of the centre frame, which are other surfaces of the pixel, never: pairs left out rather than masked, so
@@ -181,15 +182,13 @@ class CrossFrameRaNAD(nn.Module):
         c = frames[centre]
         rows = torch.empty_like(gather)
         rows[gather] = torch.arange(gather.numel())
-        sizes = torch.tensor([f.layout.bins for f in frames])
-        first = int(sizes[:centre].sum())
+        first = sum(f.layout.bins for f in frames[:centre])
         own_rows = rows[first:first + c.layout.bins]
         pairs = pixel_pairs(c.layout.pixels, keys)
         out = {"own": own_rows, "pairs": pairs, "feats": feats}
         if self.config.temporal_guard:
             allg = torch.cat([f[:, -GUIDE_WIDTH:] for f in feats])[gather]
             out["feats"] = [f[:, :-GUIDE_WIDTH] for f in feats]
-            frame = torch.bucketize(gather, torch.cumsum(sizes, 0), right=True)
             qi, kj = pairs
             ok = (kj == own_rows[qi]) | ((frame[kj] != centre) & consistent(allg[own_rows][qi], allg[kj]))
             out["pairs"] = (qi[ok], kj[ok])
@@ -200,7 +199,7 @@ class CrossFrameRaNAD(nn.Module):
         layers, which is how AOVs reuse the kernels."""
         c = frames[centre]
         out = {}
-        keys, gather = temporal_layout([f.layout for f in frames]) if len(frames) > 1 else (None, None)
+        keys, gather, frame = temporal_layout([f.layout for f in frames]) if len(frames) > 1 else (None, None, None)
         if self.input_keys and len(frames) > 1:   # split the centre's [backbone | keys] (see embeddings)
             dim = self.config.dim
             feats = list(feats)
@@ -209,7 +208,7 @@ class CrossFrameRaNAD(nn.Module):
             own = feats[centre]
         match = {}
         if self.matching and len(frames) > 1:
-            match = self._match_args(feats, frames, centre, keys, gather)
+            match = self._match_args(feats, frames, centre, keys, gather, frame)
             feats = match.pop("feats")
         allf = torch.cat(feats)[gather] if len(frames) > 1 else None   # the window's keys, shared by every layer
         for name, rec in self.single.recon.items():

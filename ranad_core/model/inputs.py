@@ -60,9 +60,16 @@ GUIDE_COLUMNS = {"depth": slice(8, 9), "albedo": slice(9, 12), "normal": slice(1
                  "radiance": slice(0, 6)}
 
 
+# the columns of guides()' rows
+GUIDE_LAYOUT = {"depth": slice(0, 1), "albedo": slice(1, 4), "normal": slice(4, 7), "prior": slice(7, 10),
+                "black": slice(10, 11)}
+GUIDE_WIDTH = 11
+
+
 def guides(features: torch.Tensor, feature_set: str) -> torch.Tensor:
-    """[N, 11] the guides of `features`: depth, albedo, normal, prior (log1p of the exposure-normalised flat prior;
-    zero without "prior" features) and 1 where the bin's noisy radiance is exactly black."""
+    """[N, GUIDE_WIDTH] the guides of `features` (GUIDE_LAYOUT): depth, albedo, normal, prior (log1p of the
+    exposure-normalised flat prior; zero without "prior" features) and 1 where the bin's noisy radiance is exactly
+    black."""
     cols = [features[:, GUIDE_COLUMNS[k]] for k in ("depth", "albedo", "normal")]
     prior = features[:, GUIDE_COLUMNS["prior"]] if feature_set == "prior" else features.new_zeros(len(features), 3)
     black = (features[:, GUIDE_COLUMNS["radiance"]] == 0).all(1, keepdim=True).to(features.dtype)

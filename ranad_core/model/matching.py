@@ -20,6 +20,8 @@ from __future__ import annotations
 import torch
 from torch import nn
 
+from ..rana.reference import neighbour_pairs
+from .inputs import GUIDE_LAYOUT
 from .layers import Layout
 
 PAIR_DIM = 16    # width of each bin's projection the pair scores compare
@@ -29,15 +31,9 @@ SELF_BONUS = 3.0  # initial logit bonus of the query's own bin: the step starts 
 
 def pixel_pairs(q_pixels: torch.Tensor, keys: Layout) -> tuple[torch.Tensor, torch.Tensor]:
     """Every (query row, key row) pair that shares a pixel: q_pixels [Nq, 2] (y, x) -> (qi [P], kj [P]), grouped
-    by query in ascending order."""
-    p = q_pixels[:, 0].long() * keys.width + q_pixels[:, 1].long()
-    start = keys.offsets[p]
-    n = keys.offsets[p + 1] - start
-    total = int(n.sum())
-    qi = torch.repeat_interleave(torch.arange(p.numel()), n, output_size=total)
-    first = torch.cumsum(n, 0) - n
-    within = torch.arange(total) - torch.repeat_interleave(first, n, output_size=total)
-    return qi, torch.repeat_interleave(start, n, output_size=total) + within
+    by query in ascending order (the reference RaNA's pairs for a disc of radius 0)."""
+    qi, kj, _, _ = neighbour_pairs(q_pixels, keys.offsets, keys.size, 0.0)
+    return qi, kj
 
 
 def segment_softmax(logits: torch.Tensor, seg: torch.Tensor, segments: int) -> torch.Tensor:
@@ -54,20 +50,19 @@ def segment_softmax(logits: torch.Tensor, seg: torch.Tensor, segments: int) -> t
 # a bin whose samples were all black takes nothing from bins that were not, as metrics such as HDR-FLIP see even
 # 1e-7 of light leaked onto exact black). Rules, not learned scores: they mean the same on scenes unlike the
 # training ones, where the learned scores alone blended what they should not (issue 25).
-GUARD = (("depth", slice(0, 1), 0.25), ("albedo", slice(1, 4), 0.1), ("normal", slice(4, 7), 0.25),
-         ("black", slice(10, 11), 0.5))
-PRIOR = slice(7, 10)
+GUARD = {"depth": 0.25, "albedo": 0.1, "normal": 0.25, "black": 0.5}
 PRIOR_TOLERANCE = 0.2     # |log ratio| of the priors: about 20%
 PRIOR_FLOOR = 0.01        # in units of the frame's exposure scale: below it, differences count as equal
-GUIDE_WIDTH = 11
 
 
 def consistent(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
-    """[P] whether guide rows a [P, 11] and b [P, 11] agree within GUARD and PRIOR_TOLERANCE."""
+    """[P] whether guide rows a [P, GUIDE_WIDTH] and b (inputs.guides) agree within GUARD and PRIOR_TOLERANCE."""
     ok = torch.ones(a.shape[0], dtype=torch.bool)
-    for _, cols, tol in GUARD:
+    for name, tol in GUARD.items():
+        cols = GUIDE_LAYOUT[name]
         ok &= (a[:, cols] - b[:, cols]).abs().amax(1) <= tol
-    pa, pb = (torch.expm1(x[:, PRIOR].clamp(min=0)) + PRIOR_FLOOR for x in (a, b))
+    prior = GUIDE_LAYOUT["prior"]
+    pa, pb = (torch.expm1(x[:, prior].clamp(min=0)) + PRIOR_FLOOR for x in (a, b))
     return ok & (torch.log(pa / pb).abs().amax(1) <= PRIOR_TOLERANCE)
 
 
