@@ -7,6 +7,7 @@
 #include "rana_binding.h"
 #include "rana_cpu_buffers.h"
 #include "rana_cpu_kernels.h"
+#include "rows_cpu.h"
 
 namespace {
 
@@ -200,4 +201,7 @@ std::vector<torch::Tensor> rana_backward(torch::Tensor dout, torch::Tensor q, to
 PYBIND11_MODULE(TORCH_EXTENSION_NAME, m) {
   m.def("forward", &rana_forward, "RaNA forward (CPU): returns (out, lse)");
   m.def("backward", &rana_backward, "RaNA backward (CPU): returns (dq, dk, dv, dbias)");
+  m.def("rows_ln_linear", &rows_ln_linear, "fused [LayerNorm] + linear, split into column blocks (inference)");
+  m.def("rows_linear_residual", &rows_linear_residual, "fused residual + linear(s) (inference)");
+  m.def("rows_mlp", &rows_mlp, "fused [LayerNorm] + linear + ReLU + linear [+ residual] (inference)");
 }

@@ -11,6 +11,7 @@ from __future__ import annotations
 import torch
 from torch import nn
 
+from . import fused
 from .layers import Layout, MultiHeadRaNA, RaNABlock, bin_dropout
 
 
@@ -36,20 +37,32 @@ class UNet(nn.Module):
 
     def forward(self, feat: torch.Tensor, layout: Layout) -> torch.Tensor:
         skips, layouts = [], [layout]
+        quick = fused.active(feat, self.down[0].backend if self.levels else "auto")   # inference (fused.py)
         for lv in range(self.levels):
             for blk in self.enc[lv]:
                 feat = blk(feat, layouts[-1])
             skips.append(feat)
             kept, coarse = bin_dropout(layouts[-1], (lv + self.pattern) % 2)
-            x = self.norms[2 * lv](feat)
-            feat = feat[kept] + self.down[lv](x[kept], x, coarse.pixels, layouts[-1])
+            norm, down = self.norms[2 * lv], self.down[lv]
+            if quick:
+                sub = feat[kept]
+                (q,), (k, v) = fused.ln_linear(sub, norm, [down.q]), fused.ln_linear(feat, norm, [down.k, down.v])
+                feat = fused.linear_residual(sub, down.attend(q, k, v, coarse.pixels, layouts[-1]), down.out)
+            else:
+                x = norm(feat)
+                feat = feat[kept] + down(x[kept], x, coarse.pixels, layouts[-1])
             layouts.append(coarse)
         for blk in self.mid:
             feat = blk(feat, layouts[-1])
         for lv in reversed(range(self.levels)):
-            fine = layouts[lv]
-            up = self.up[lv](self.norms[2 * lv + 1](skips[lv]), feat, fine.pixels, layouts[lv + 1])
-            feat = skips[lv] + self.merge[lv](torch.cat([skips[lv], up], dim=1))
+            fine, norm, up = layouts[lv], self.norms[2 * lv + 1], self.up[lv]
+            if quick:
+                (q,), (k, v) = fused.ln_linear(skips[lv], norm, [up.q]), fused.ln_linear(feat, None, [up.k, up.v])
+                feat = fused.merge_residual(skips[lv], up.attend(q, k, v, fine.pixels, layouts[lv + 1]), up.out,
+                                            self.merge[lv])
+            else:
+                y = up(norm(skips[lv]), feat, fine.pixels, layouts[lv + 1])
+                feat = skips[lv] + self.merge[lv](torch.cat([skips[lv], y], dim=1))
             for blk in self.dec[lv]:
                 feat = blk(feat, fine)
         return feat

@@ -150,7 +150,7 @@ class CrossFrameRaNAD(nn.Module):
         features in front of its keys ([N, 2 dim]). What the AOV cache keeps."""
         if self.input_keys:
             c = frames[centre]
-            own = self.single.backbone(self.single.embed(with_frame_id(c, 0)), c.layout)
+            own = self.single.backbone(self.single.embed_features(with_frame_id(c, 0)), c.layout)
             if len(frames) == 1:
                 return [own]
             feats = [self.temporal_embed(with_frame_id(f, i - centre)) for i, f in enumerate(frames)]
@@ -159,7 +159,7 @@ class CrossFrameRaNAD(nn.Module):
             feats[centre] = torch.cat([own, feats[centre]], 1)
             return feats
         layouts = [f.layout for f in frames]
-        feats = [self.single.embed(with_frame_id(f, i - centre)) for i, f in enumerate(frames)]
+        feats = [self.single.embed_features(with_frame_id(f, i - centre)) for i, f in enumerate(frames)]
         keys, gather, _ = temporal_layout(layouts) if len(frames) > 1 else (None, None, None)
         for k, unet in enumerate(self.single.backbone.unets):
             feats = [unet(f, l) for f, l in zip(feats, layouts)]

@@ -14,6 +14,7 @@ import torch
 from torch import nn
 
 from ..rana import bin_pixels, disc, rana
+from . import fused
 
 
 @dataclass
@@ -78,9 +79,15 @@ class MultiHeadRaNA(nn.Module):
 
     def forward(self, q_feat: torch.Tensor, kv_feat: torch.Tensor, q_pixels: torch.Tensor,
                 keys: Layout) -> torch.Tensor:
-        q, k, v = self._heads(self.q(q_feat)), self._heads(self.k(kv_feat)), self._heads(self.v(kv_feat))
+        return self.out(self.attend(self.q(q_feat), self.k(kv_feat), self.v(kv_feat), q_pixels, keys))
+
+    def attend(self, q: torch.Tensor, k: torch.Tensor, v: torch.Tensor, q_pixels: torch.Tensor,
+               keys: Layout) -> torch.Tensor:
+        """The attention between the projections: q [Nq, heads*d], k and v [Nk, heads*d] -> [Nq, heads*d] (before
+        the output projection; the fused inference path projects around it itself)."""
+        q, k, v = self._heads(q), self._heads(k), self._heads(v)
         y = rana(q, k, v, q_pixels, keys.offsets, keys.size, self.radius, self.bias, backend=self.backend)
-        return self.out(y.reshape(y.shape[0], self.heads * self.head_dim))
+        return y.reshape(y.shape[0], self.heads * self.head_dim)
 
 
 class RaNABlock(nn.Module):
@@ -97,6 +104,11 @@ class RaNABlock(nn.Module):
         self.mlp = nn.Sequential(nn.Linear(dim, hidden), nn.ReLU(), nn.Linear(hidden, dim))
 
     def forward(self, feat: torch.Tensor, layout: Layout) -> torch.Tensor:
+        a = self.attn
+        if fused.active(feat, a.backend):   # inference: the same maths, row by row (fused.py)
+            q, k, v = fused.ln_linear(feat, self.norm1, [a.q, a.k, a.v])
+            z = fused.linear_residual(feat, a.attend(q, k, v, layout.pixels, layout), a.out)
+            return fused.mlp(z, self.norm2, self.mlp[0], self.mlp[2], residual=True)
         x = self.norm1(feat)
-        z = feat + self.attn(x, x, layout.pixels, layout)
+        z = feat + a(x, x, layout.pixels, layout)
         return z + self.mlp(self.norm2(z))

@@ -9,6 +9,7 @@ from __future__ import annotations
 import torch
 from torch import nn
 
+from . import fused
 from .backbone import MultiUNet
 from .config import ModelConfig
 from .inputs import ModelInputs
@@ -31,7 +32,11 @@ class RaNAD(nn.Module):
 
     def embeddings(self, inputs: ModelInputs) -> torch.Tensor:
         """The backbone's per-bin embeddings (what the AOV reuse caches)."""
-        return self.backbone(self.embed(inputs.features), inputs.layout)
+        return self.backbone(self.embed_features(inputs.features), inputs.layout)
+
+    def embed_features(self, x: torch.Tensor) -> torch.Tensor:
+        """The input embedding of features [N, F] (the fused inference path where it applies, fused.py)."""
+        return fused.mlp(x, None, self.embed[0], self.embed[2], False) if fused.active(x) else self.embed(x)
 
     def modulation(self, name: str, inputs: ModelInputs):
         """What layer `name`'s values are demodulated by for these inputs (None: not demodulated)."""

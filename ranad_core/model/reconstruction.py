@@ -27,6 +27,7 @@ import torch
 from torch import nn
 
 from ..rana import rana
+from . import fused
 from .layers import Layout, bin_dropout
 
 
@@ -58,6 +59,8 @@ class KernelAttention(nn.Module):
         """values [Nk, C] -> [Nq, C]: each head's kernel applied to all C value channels, heads mixed convexly.
         q_depth [Nq], k_depth [Nk]: the bins' log depths (needed with the depth term, ignored without)."""
         H, d = self.heads, self.head_dim
+        if fused.active(q_feat, self.backend) and not hasattr(self, "depth_theta"):
+            return self._fused_forward(q_feat, k_feat, q_pixels, keys, values)
         q = self.q(q_feat).view(q_feat.shape[0], d, H)   # channel-major, as the kernels stream it
         k = self.k(k_feat).view(k_feat.shape[0], d, H)
         w = self.depth_weight()
@@ -74,6 +77,23 @@ class KernelAttention(nn.Module):
         v = values.unsqueeze(1).expand(-1, H, -1)
         y = rana(q, k, v, q_pixels, keys.offsets, keys.size, self.radius, self.bias, backend=self.backend)
         return (y * torch.softmax(self.head_mix, 0)[None, :, None]).sum(1)
+
+
+    def _fused_forward(self, q_feat, k_feat, q_pixels, keys: Layout, values: torch.Tensor) -> torch.Tensor:
+        """forward for inference without the depth term: q, k and v made directly in the layout the kernels read
+        with the heads padded to their block of 4 (fused.padded_heads), so the op copies nothing."""
+        H, hp = self.heads, fused.padded_heads(self.heads)
+        (q,) = fused.ln_linear(q_feat, None, [fused.head_padded(self.q, self.head_dim, H, hp)])
+        (k,) = fused.ln_linear(k_feat, None, [fused.head_padded(self.k, self.head_dim, H, hp)])
+        q, k = (x.view(len(x), self.head_dim, hp).transpose(1, 2) for x in (q, k))
+        v = values[:, :, None].expand(-1, -1, hp).contiguous().transpose(1, 2)   # channel-major [N, hp, C]
+        bias = self.bias if hp == H else torch.cat([self.bias, self.bias.new_zeros(hp - H, *self.bias.shape[1:])])
+        y = rana(q, k, v, q_pixels, keys.offsets, keys.size, self.radius, bias, backend=self.backend)
+        mix = torch.softmax(self.head_mix, 0)
+        out = y[:, 0] * mix[0]
+        for h in range(1, H):
+            out += y[:, h] * mix[h]
+        return out
 
 
 DEPTH_W0 = math.log(20.0)   # the depth term's starting w: (a 10% depth step)^2 x 20 = 0.2 logits, nearly off

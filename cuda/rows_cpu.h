@@ -1,0 +1,22 @@
+// Fused per-bin layers for inference on the CPU (rows_cpu.cpp): float32, contiguous [N, C] rows, weights transposed
+// ([C_in, C_out]). Bound into the CPU extension by rana_cpu.cpp.
+#pragma once
+
+#include <torch/extension.h>
+
+#include <vector>
+
+// [LayerNorm(x)] wt + bias, returned as contiguous column blocks of the given widths (e.g. q, k and v).
+std::vector<torch::Tensor> rows_ln_linear(torch::Tensor x, c10::optional<torch::Tensor> ln_w,
+                                          c10::optional<torch::Tensor> ln_b, double eps, torch::Tensor wt,
+                                          torch::Tensor bias, std::vector<int64_t> splits);
+
+// res + y1 wt1 [+ y2 wt2] + bias: a projection (or the merge of two inputs) added to the residual stream.
+torch::Tensor rows_linear_residual(torch::Tensor res, torch::Tensor y1, torch::Tensor wt1,
+                                   c10::optional<torch::Tensor> y2, c10::optional<torch::Tensor> wt2,
+                                   torch::Tensor bias);
+
+// [x +] ReLU([LayerNorm(x)] wt1 + b1) wt2 + b2: a RaNA block's MLP branch with its residual, or the input embedding.
+torch::Tensor rows_mlp(torch::Tensor x, c10::optional<torch::Tensor> ln_w, c10::optional<torch::Tensor> ln_b,
+                       double eps, torch::Tensor wt1, torch::Tensor b1, torch::Tensor wt2, torch::Tensor b2,
+                       bool residual);

@@ -1,0 +1,112 @@
+"""The fused inference path of the per-bin layers (model/fused.py, cuda/rows_cpu.cpp): each row kernel equals the
+torch ops it replaces, and a model's output with the path equals its output without it (the plain torch modules are
+the oracle), to float rounding."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+import torch.nn.functional as F
+
+from model_factory import demodulating, depth_kernel, open_depth_term
+from ranad_core.channels import canonical, detect
+from ranad_core.exr import read_deep
+from ranad_core.model import RaNAD, feature_dim, fused, get_config, prepare
+from ranad_core.rana.extension import cpu_extension_or_none
+
+FRAME = Path(__file__).resolve().parents[1] / "examples" / "synth_shot" / "noisy_spp16.0001.exr"
+ext = cpu_extension_or_none()
+pytestmark = pytest.mark.skipif(ext is None, reason="the C++ extension could not be built here (no compiler)")
+
+
+def close(a, b, tol=1e-5):
+    scale = float(b.abs().max()) + 1e-6
+    assert float((a - b).abs().max()) <= tol * scale, float((a - b).abs().max()) / scale
+
+
+@pytest.mark.parametrize("rows,c,outs", [(1000, 32, [32, 32, 32]), (53, 43, [20]), (7, 32, [16, 5])])
+@pytest.mark.parametrize("with_norm", [True, False])
+def test_ln_linear_is_layer_norm_then_linear(rows, c, outs, with_norm):
+    """Rows not a multiple of the micro-kernel's, outputs not a multiple of a vector (the remainder paths)."""
+    g = torch.Generator().manual_seed(rows + c)
+    x = torch.randn(rows, c, generator=g) * 3 + 1
+    lw, lb = torch.rand(c, generator=g) + 0.5, torch.randn(c, generator=g)
+    w, b = torch.randn(sum(outs), c, generator=g), torch.randn(sum(outs), generator=g)
+    got = ext.rows_ln_linear(x, lw if with_norm else None, lb if with_norm else None, 1e-5, w.t().contiguous(), b,
+                             outs)
+    xn = F.layer_norm(x, (c,), lw, lb, 1e-5) if with_norm else x
+    want = torch.split(F.linear(xn, w, b), outs, 1)
+    assert [tuple(t.shape) for t in got] == [(rows, o) for o in outs]
+    for a, e in zip(got, want):
+        assert a.is_contiguous()
+        close(a, e)
+
+
+@pytest.mark.parametrize("two", [False, True])
+def test_linear_residual(two):
+    g = torch.Generator().manual_seed(1)
+    res, y1, y2 = (torch.randn(101, 32, generator=g) for _ in range(3))
+    w1, w2, b = torch.randn(32, 32, generator=g), torch.randn(32, 32, generator=g), torch.randn(32, generator=g)
+    got = ext.rows_linear_residual(res, y1, w1.t().contiguous(), y2 if two else None,
+                                   w2.t().contiguous() if two else None, b)
+    want = res + F.linear(y1, w1, b) + (F.linear(y2, w2) if two else 0)
+    close(got, want)
+
+
+@pytest.mark.parametrize("with_norm,residual,c", [(True, True, 32), (False, False, 43)])
+def test_mlp(with_norm, residual, c):
+    g = torch.Generator().manual_seed(2)
+    x = torch.randn(333, c, generator=g)
+    lw, lb = torch.rand(c, generator=g), torch.randn(c, generator=g)
+    w1, b1 = torch.randn(64, c, generator=g), torch.randn(64, generator=g)
+    out = c if residual else 32
+    w2, b2 = torch.randn(out, 64, generator=g), torch.randn(out, generator=g)
+    got = ext.rows_mlp(x, lw if with_norm else None, lb if with_norm else None, 1e-5, w1.t().contiguous(), b1,
+                       w2.t().contiguous(), b2, residual)
+    xn = F.layer_norm(x, (c,), lw, lb, 1e-5) if with_norm else x
+    want = F.linear(torch.relu(F.linear(xn, w1, b1)), w2, b2) + (x if residual else 0)
+    close(got, want)
+
+
+def test_bad_shapes_are_refused():
+    x = torch.randn(10, 32)
+    with pytest.raises(RuntimeError, match="splits add up"):
+        ext.rows_ln_linear(x, None, None, 1e-5, torch.randn(32, 8), torch.randn(8), [4, 5])
+    with pytest.raises(RuntimeError, match="input channels"):
+        ext.rows_linear_residual(x, x, torch.randn(16, 32), None, None, torch.randn(32))
+    with pytest.raises(RuntimeError, match="contiguous"):
+        ext.rows_mlp(x.t(), None, None, 1e-5, torch.randn(10, 4), torch.randn(4), torch.randn(4, 10),
+                     torch.randn(10), True)
+
+
+@pytest.mark.parametrize("config", ["cpu-small-pd", "depth-kernel"])
+def test_model_output_equals_the_plain_modules(config, monkeypatch):
+    """A whole single-frame model (input embedding, both U-Nets, every reconstruction) with and without the fused
+    path, on the bundled frame: the same output to float rounding, and the path was taken."""
+    img = read_deep(FRAME)
+    srt = canonical(img, detect(img))[0].sorted()[0]
+    from ranad_core.model.prior import frame_scale, with_prior
+
+    srt = with_prior(srt, None, presorted=True)
+    inputs = prepare(srt, features="prior", scale=frame_scale(srt))
+    torch.manual_seed(0)
+    cfg = get_config("cpu-small-pd") if config == "cpu-small-pd" else depth_kernel(demodulating(get_config(
+        "cpu-small-p")))
+    model = RaNAD(cfg, feature_dim("prior")).eval()
+    if config == "depth-kernel":
+        open_depth_term(model)
+    calls = []
+    real = fused.ln_linear
+    monkeypatch.setattr(fused, "ln_linear", lambda *a: calls.append(1) or real(*a))
+    with torch.inference_mode():
+        fast = model(inputs)
+        assert calls, "the fused path was not taken"
+        monkeypatch.setenv("RANAD_NO_FUSED", "1")
+        n = len(calls)
+        plain = model(inputs)
+        assert len(calls) == n
+    for k in plain:
+        close(fast[k], plain[k], 1e-4)
