@@ -25,10 +25,10 @@ import fnmatch
 import numpy as np
 import torch
 
-from .channels import ALIASES, DEPTH, EMISSION, RGB, SPECULAR, ChannelMap, canonical
+from .channels import ALIASES, EMISSION, RGB, SPECULAR, ChannelMap, canonical
 from .deep import DeepImage, replace_nonfinite, unsort
 from .errors import RanadError
-from .model.inputs import ModelInputs, log_depth, modulation
+from .model.inputs import ModelInputs, modulation
 from .model.layers import Layout
 
 MAX_VALUE_CHANNELS = 63          # the RaNA kernels' widest value head is 64 channels
@@ -87,13 +87,12 @@ def _values(img: DeepImage, m: ChannelMap, layers: dict, perm: np.ndarray) -> di
 
 
 def denoise_aovs(model, images: list, centre: int, mapping: ChannelMap, layers: dict, embeddings: list,
-                 perms: list, offsets: list, flows: list | None = None, z_stats: list | None = None) -> dict:
+                 perms: list, offsets: list, flows: list | None = None) -> dict:
     """Denoised AOV layers of frame `centre`: layer -> [N, 3] in the file's bin order.
 
     images: the window's frames holding the beauty channels the mapping names and the AOV channels, not yet
-    motion-compensated; embeddings/perms/offsets/z_stats: per window frame, as the primary pass made them (the
-    cache; z_stats are needed by models whose kernels compare depths); flows: the per-pixel flows the primary pass
-    used, if any."""
+    motion-compensated; embeddings/perms/offsets: per window frame, as the primary pass made them (the cache);
+    flows: the per-pixel flows the primary pass used, if any."""
     from .denoise import is_cross_frame
     from .motion import compensate
 
@@ -108,8 +107,7 @@ def denoise_aovs(model, images: list, centre: int, mapping: ChannelMap, layers: 
         vals.append(_values(img, mapping, layers, perms[k]))
         layout = Layout.of(torch.as_tensor(offsets[k]), h, w)
         mod = modulation(srt)   # what the primary pass demodulated the diffuse layer by (demodulating models)
-        depth = None if z_stats is None else log_depth(srt.channel(DEPTH), float(z_stats[k][0]))
-        window.append(ModelInputs(layout, None, {}, None if mod is None else torch.from_numpy(mod), depth))
+        window.append(ModelInputs(layout, None, {}, None if mod is None else torch.from_numpy(mod)))
     feats = [torch.from_numpy(np.asarray(e, np.float16)).float() for e in embeddings]
     total = vals[centre]["diffuse"].shape[1]
     denoised = {"diffuse": [], "specular": []}
@@ -168,8 +166,7 @@ def denoise_cached_frame(loaded, cache_path: str, tensors: dict, meta: dict, pat
     k = len(window)
     result = denoise_aovs(loaded.model, combined, centre, mapping, layers,
                           [tensors[f"embeddings.{i}"] for i in range(k)],
-                          [tensors[f"perm.{i}"] for i in range(k)], [tensors[f"offsets.{i}"] for i in range(k)],
-                          z_stats=[tuple(r) for r in np.asarray(tensors["z_stats"], np.float64).reshape(-1, 2)])
+                          [tensors[f"perm.{i}"] for i in range(k)], [tensors[f"offsets.{i}"] for i in range(k)])
     target = replace_nonfinite(aov_imgs[centre], mapping.depth_channels())[0]   # the one NaN/Inf policy
     vals = target.values.copy()
     for layer, chans in layers.items():

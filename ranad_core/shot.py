@@ -195,7 +195,7 @@ def with_denoised_aovs(model, images, centre, mapping, result, pattern: str, sou
     if not layers:
         raise RanadError(f"no AOV layers match {pattern!r} (layers with .R/.G/.B channels)", source)
     out = denoise_aovs(model, images, centre, mapping, layers, result.embeddings, result.perms, result.offsets,
-                       flows, result.z_stats)
+                       flows)
     vals = result.image.values.copy()
     for layer, chans in layers.items():
         for i, c in enumerate(chans):

@@ -12,7 +12,7 @@ import pytest
 import torch
 from click.testing import CliRunner
 
-from model_factory import demodulating, depth_kernel, input_keys_config, matching_config, open_depth_term
+from model_factory import demodulating, input_keys_config, matching_config
 from ranad_cli.main import cli
 from ranad_core.aov import aov_layers, denoise_aovs, kernel_rule
 from ranad_core.channels import detect
@@ -62,16 +62,8 @@ def models():
     guarded = CrossFrameRaNAD.from_single(demod, demodulating(matching_config(guard=True)), feature_dim()).eval()
     for t in guarded.temporal.values():         # spread the matching step's weights over the candidates
         torch.nn.init.constant_(t.self_bonus, 0.0)
-    deep = RaNAD(depth_kernel(demodulating(get_config("cpu-small"))), feature_dim()).eval()
-    deep.load_state_dict({**deep.state_dict(), **demod.state_dict()})
-    open_depth_term(deep)
-    deep_guarded = CrossFrameRaNAD.from_single(deep, depth_kernel(demodulating(matching_config(guard=True))),
-                                               feature_dim()).eval()
-    deep_guarded.load_state_dict({**guarded.state_dict(), **{k: v for k, v in deep_guarded.state_dict().items()
-                                                              if k.endswith("depth_theta")}})
     return {"single": single, "cross": cross, "output-mix": mixed, "input-keys": keyed, "demodulated": demod,
-            "demodulated-input-keys": demod_keyed, "guarded-matching": guarded, "depth-kernel": deep,
-            "guarded-matching-depth-kernel": deep_guarded}
+            "demodulated-input-keys": demod_keyed, "guarded-matching": guarded}
 
 
 def test_layers_and_rules():
@@ -83,8 +75,7 @@ def test_layers_and_rules():
 
 
 @pytest.mark.parametrize("kind", ["single", "cross", "output-mix", "input-keys", "demodulated",
-                                  "demodulated-input-keys", "guarded-matching", "depth-kernel",
-                                  "guarded-matching-depth-kernel"])
+                                  "demodulated-input-keys", "guarded-matching"])
 def test_light_groups_sum_to_the_denoised_beauty(kind):
     model = models()[kind]
     frames = [exact_groups(read_deep(SHOT / f"noisy_spp16.{i:04d}.exr")) for i in range(3)]
@@ -93,8 +84,7 @@ def test_light_groups_sum_to_the_denoised_beauty(kind):
     images, centre = (frames, 1) if is_cross_frame(model) else ([frames[1]], 0)
     res = denoise_window(model, images, centre, want_embeddings=True, tile=16)   # tiles: the primary pass
     layers = aov_layers(frames[1].channels, "lg_*")
-    out = denoise_aovs(model, images, centre, detect(frames[1]), layers, res.embeddings, res.perms, res.offsets,
-                       z_stats=res.z_stats)
+    out = denoise_aovs(model, images, centre, detect(frames[1]), layers, res.embeddings, res.perms, res.offsets)
     lg_d = sum(out[g].astype(np.float64) for g in GROUPS)
     _, rgb_d = sums(res.image)
     scale = np.abs(rgb_d).max()
@@ -146,12 +136,6 @@ def test_aov_command_through_the_cache_of_a_guarded_matching_model(tmp_path):
     """The matching step with its guard: the guides travel in the cached embeddings, so `ranad aov` rebuilds the
     same allowed pairs and the light groups still sum to the denoised beauty."""
     denoise_then_aov(models()["guarded-matching"], tmp_path)
-
-
-def test_aov_command_through_the_cache_of_a_depth_kernel_model(tmp_path):
-    """Kernels that compare the bins' depths: `ranad aov` rebuilds the depths from the files and the cached depth
-    statistics, so the light groups still sum to the denoised beauty."""
-    denoise_then_aov(models()["guarded-matching-depth-kernel"], tmp_path)
 
 
 def test_aov_command_through_the_cache_and_refusals(tmp_path):

@@ -11,7 +11,6 @@ import pytest
 import torch
 import torch.nn.functional as F
 
-from model_factory import demodulating, depth_kernel, open_depth_term
 from ranad_core.channels import canonical, detect
 from ranad_core.exr import read_deep
 from ranad_core.model import RaNAD, feature_dim, fused, get_config, prepare
@@ -82,22 +81,22 @@ def test_bad_shapes_are_refused():
                      torch.randn(10), True)
 
 
-@pytest.mark.parametrize("config", ["cpu-small-pd", "depth-kernel"])
+@pytest.mark.parametrize("config", ["cpu-small-pd", "cpu-small"])
 def test_model_output_equals_the_plain_modules(config, monkeypatch):
     """A whole single-frame model (input embedding, both U-Nets, every reconstruction) with and without the fused
     path, on the bundled frame: the same output to float rounding, and the path was taken."""
-    img = read_deep(FRAME)
-    srt = canonical(img, detect(img))[0].sorted()[0]
     from ranad_core.model.prior import frame_scale, with_prior
 
-    srt = with_prior(srt, None, presorted=True)
-    inputs = prepare(srt, features="prior", scale=frame_scale(srt))
+    img = read_deep(FRAME)
+    srt = canonical(img, detect(img))[0].sorted()[0]
+    cfg = get_config(config)
+    if cfg.features == "prior":
+        srt = with_prior(srt, None, presorted=True)
+        inputs = prepare(srt, features="prior", scale=frame_scale(srt))
+    else:
+        inputs = prepare(srt)
     torch.manual_seed(0)
-    cfg = get_config("cpu-small-pd") if config == "cpu-small-pd" else depth_kernel(demodulating(get_config(
-        "cpu-small-p")))
-    model = RaNAD(cfg, feature_dim("prior")).eval()
-    if config == "depth-kernel":
-        open_depth_term(model)
+    model = RaNAD(cfg, feature_dim(cfg.features)).eval()
     calls = []
     real = fused.ln_linear
     monkeypatch.setattr(fused, "ln_linear", lambda *a: calls.append(1) or real(*a))

@@ -43,8 +43,6 @@ class ModelConfig:
     demodulate: bool = False
     # matching temporal step: neighbours' bins take part only where their guides agree with the bin's (matching.GUARD)
     temporal_guard: bool = False
-    # the reconstruction kernels' logits get a learned penalty on the bins' relative depth (reconstruction.py)
-    depth_kernel: bool = False
 
     def to_dict(self) -> dict:
         d = asdict(self)
@@ -116,11 +114,6 @@ CONFIGS["cpu-small-pd-xm"] = ModelConfig(**{**CONFIGS["cpu-small-pd-xk"].__dict_
 # with the bin's, rules that hold on scene families the scores never saw (issue 25)
 CONFIGS["cpu-small-pd-xg"] = ModelConfig(**{**CONFIGS["cpu-small-pd-xm"].__dict__, "name": "cpu-small-pd-xg",
                                            "temporal_guard": True})
-
-# cpu-small-pd whose reconstruction kernels penalise depth differences, -w (log z_q - log z_k)^2 with w learned per
-# head: on held-out stacks of semi-transparent layers the kernels mixed one layer's alpha into the next (issue 24)
-CONFIGS["cpu-small-pdz"] = ModelConfig(**{**CONFIGS["cpu-small-pd"].__dict__, "name": "cpu-small-pdz",
-                                         "depth_kernel": True})
 
 
 def get_config(name: str) -> ModelConfig:

@@ -230,9 +230,9 @@ class CrossFrameRaNAD(nn.Module):
                 t = self.temporal[name](query, allf, c.layout.pixels, keys, allv, **match)
                 g = torch.sigmoid(self.temporal_gate[name](own))
                 v = v + g * (t - v)
-            out[name] = rec(own, c.layout, v, self.single.kernel_depth(c))
+            out[name] = rec(own, c.layout, v)
             if self.config.output_mix and len(frames) > 1:
-                spatial = [out[name] if i == centre else rec(feats[i], f.layout, vals[i], self.single.kernel_depth(f))
+                spatial = [out[name] if i == centre else rec(feats[i], f.layout, vals[i])
                            for i, f in enumerate(frames)]
                 m = self.mix[name](feats[centre], allf, c.layout.pixels, keys, torch.cat(spatial)[gather])
                 g = torch.sigmoid(self.mix_gate[name](feats[centre]))

@@ -44,9 +44,6 @@ class ModelInputs:
     # [N, 3] albedo + DEMOD_FLOOR where the image has albedo and the diffuse/specular split, else None: what a
     # demodulating model divides the diffuse layer by (modulation())
     modulation: torch.Tensor | None = None
-    # [N] each bin's log depth less the frame's mean log depth (log_depth()): what reconstructions with the depth
-    # term compare (reconstruction.KernelAttention)
-    log_depth: torch.Tensor | None = None
 
     @property
     def feature_dim(self) -> int:
@@ -119,14 +116,6 @@ def depth_stats(img: DeepImage) -> tuple[float, float]:
     return float(logz.mean()), float(logz.std())
 
 
-def log_depth(depth: np.ndarray, mean: float) -> torch.Tensor:
-    """[N] float32 log(max(depth, 1e-4)) - mean for depths [N] or [N, 1]: centred by the frame's mean log depth
-    (depth_stats), so values stay small where the reconstruction squares them. The one formula for the primary
-    pass and the AOV reuse, which must build the same kernels."""
-    z = np.log(np.maximum(np.asarray(depth, np.float64).reshape(-1), 1e-4)) - mean
-    return torch.from_numpy(z.astype(np.float32))
-
-
 def prepare(img: DeepImage, z_stats: tuple[float, float] | None = None, features: str = "log1p",
             scale: float = 1.0) -> ModelInputs:
     """Features and noisy layers of a deep image whose bins are in front-to-back order within each pixel.
@@ -165,4 +154,4 @@ def prepare(img: DeepImage, z_stats: tuple[float, float] | None = None, features
                        (b / nb.clamp(min=1)).unsqueeze(1)], dim=1)
     mod = modulation(img)
     return ModelInputs(layout, feats, {k: torch.from_numpy(v) for k, v in layers.items()},
-                       None if mod is None else torch.from_numpy(mod), log_depth(layers["depth"], mean))
+                       None if mod is None else torch.from_numpy(mod))

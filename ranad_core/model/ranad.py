@@ -27,7 +27,7 @@ class RaNAD(nn.Module):
         self.backbone = MultiUNet(c.dim, c.unets, c.levels, c.blocks_per_level, c.heads, c.head_dim, c.radius,
                                   c.radius_growth, backend)
         self.recon = nn.ModuleDict({name: Reconstruction(c.dim, r.scales, r.heads, r.head_dim, r.radius,
-                                                         r.radius_growth, backend, c.depth_kernel)
+                                                         r.radius_growth, backend)
                                     for name, r in c.recon.items()})
 
     def embeddings(self, inputs: ModelInputs) -> torch.Tensor:
@@ -42,19 +42,10 @@ class RaNAD(nn.Module):
         """What layer `name`'s values are demodulated by for these inputs (None: not demodulated)."""
         return inputs.modulation if self.config.demodulate and name in DEMODULATED else None
 
-    def kernel_depth(self, inputs: ModelInputs):
-        """What the reconstruction kernels compare depths by (None: a model without the depth term)."""
-        if not self.config.depth_kernel:
-            return None
-        if inputs.log_depth is None:
-            raise ValueError("this model's reconstruction needs the bins' depths (ModelInputs.log_depth)")
-        return inputs.log_depth
-
     def reconstruct_layer(self, name: str, emb: torch.Tensor, inputs: ModelInputs, values: torch.Tensor):
         """Layer `name`'s reconstruction of `values` ([N, C], the noisy layer or AOVs batched) with embeddings
         `emb`: the one way every caller (denoise, AOVs, training) applies a reconstruction module."""
-        return demodulated(self.recon[name], emb, inputs.layout, values, self.modulation(name, inputs),
-                           self.kernel_depth(inputs))
+        return demodulated(self.recon[name], emb, inputs.layout, values, self.modulation(name, inputs))
 
     def reconstruct(self, emb: torch.Tensor, inputs: ModelInputs) -> dict:
         """Denoised layers: name -> [N, C] for every configured layer the inputs carry."""

@@ -11,17 +11,9 @@ Demodulation (`demodulated`, configs with `demodulate`): the values divided per 
 guide, inputs.modulation) before the kernels and the result multiplied by the query bin's: still linear in the
 values (the same operator denoises AOVs, and light groups still sum to the beauty), but no longer a convex
 combination of them.
-
-Depth term (configs with `depth_kernel`): each kernel's logits get -w_h (z_q - z_k)^2, z the bins' log depth, one
-learned w per head. On a stack of semi-transparent layers the embeddings alone told the layers apart too loosely
-(the alpha of one layer was averaged with the next one's); a penalty on relative depth is a rule that holds in any
-scene. It rides on the same op: q gains the channels (2 w z_q, -w) and k gains (z_k, z_k^2), whose product is
--w (z_q - z_k)^2 plus a per-query constant, which the softmax ignores. Still linear in the values.
 """
 
 from __future__ import annotations
-
-import math
 
 import torch
 from torch import nn
@@ -33,11 +25,9 @@ from .layers import Layout, bin_dropout
 
 class KernelAttention(nn.Module):
     """Single-purpose RaNA whose values are the noisy layer itself (no value projection): the kernel weights
-    come from the embeddings, the values pass through untouched, which is what keeps the output linear.
-    `depth_term`: the logits also get -w_h (z_q - z_k)^2 (module docstring); forward then needs the depths."""
+    come from the embeddings, the values pass through untouched, which is what keeps the output linear."""
 
-    def __init__(self, dim: int, heads: int, head_dim: int, radius: float, backend: str = "auto",
-                 depth_term: bool = False):
+    def __init__(self, dim: int, heads: int, head_dim: int, radius: float, backend: str = "auto"):
         super().__init__()
         from ..rana import disc
 
@@ -46,42 +36,21 @@ class KernelAttention(nn.Module):
         self.k = nn.Linear(dim, heads * head_dim)
         self.bias = nn.Parameter(torch.zeros(heads, disc(radius).side, disc(radius).side))
         self.head_mix = nn.Parameter(torch.zeros(heads))  # softmax over heads: a convex mix of head kernels
-        if depth_term:  # w_h = exp(DEPTH_W0 + DEPTH_GAIN * theta_h): Adam moves theta ~lr per step, w by decades
-            self.depth_theta = nn.Parameter(torch.zeros(heads))
 
-    def depth_weight(self) -> torch.Tensor | None:
-        """[heads] the depth term's w (None without it)."""
-        theta = getattr(self, "depth_theta", None)
-        return None if theta is None else torch.exp(DEPTH_W0 + DEPTH_GAIN * theta)
-
-    def forward(self, q_feat, k_feat, q_pixels, keys: Layout, values: torch.Tensor,
-                q_depth: torch.Tensor | None = None, k_depth: torch.Tensor | None = None) -> torch.Tensor:
-        """values [Nk, C] -> [Nq, C]: each head's kernel applied to all C value channels, heads mixed convexly.
-        q_depth [Nq], k_depth [Nk]: the bins' log depths (needed with the depth term, ignored without)."""
+    def forward(self, q_feat, k_feat, q_pixels, keys: Layout, values: torch.Tensor) -> torch.Tensor:
+        """values [Nk, C] -> [Nq, C]: each head's kernel applied to all C value channels, heads mixed convexly."""
         H, d = self.heads, self.head_dim
-        if fused.active(q_feat, self.backend) and not hasattr(self, "depth_theta"):
+        if fused.active(q_feat, self.backend):
             return self._fused_forward(q_feat, k_feat, q_pixels, keys, values)
-        q = self.q(q_feat).view(q_feat.shape[0], d, H)   # channel-major, as the kernels stream it
-        k = self.k(k_feat).view(k_feat.shape[0], d, H)
-        w = self.depth_weight()
-        if w is not None:
-            if q_depth is None or k_depth is None:
-                raise ValueError("a reconstruction with the depth term needs the bins' depths")
-            # the op scales logits by 1/sqrt(d + 2): the learned part is scaled back to 1/sqrt(d) and the depth
-            # channels carry sqrt(d + 2), so the depth term enters unscaled
-            full = math.sqrt(d + 2)
-            zq, zk = q_depth.to(q.dtype)[:, None, None], k_depth.to(k.dtype)[:, None, None]
-            q = torch.cat([q * (full / math.sqrt(d)), (2 * full) * w * zq, (-full * w).expand(len(q), 1, H)], 1)
-            k = torch.cat([k, zk.expand(-1, 1, H), (zk * zk).expand(-1, 1, H)], 1)
-        q, k = q.transpose(1, 2), k.transpose(1, 2)
+        q = self.q(q_feat).view(q_feat.shape[0], d, H).transpose(1, 2)   # channel-major, as the kernels stream it
+        k = self.k(k_feat).view(k_feat.shape[0], d, H).transpose(1, 2)
         v = values.unsqueeze(1).expand(-1, H, -1)
         y = rana(q, k, v, q_pixels, keys.offsets, keys.size, self.radius, self.bias, backend=self.backend)
         return (y * torch.softmax(self.head_mix, 0)[None, :, None]).sum(1)
 
-
     def _fused_forward(self, q_feat, k_feat, q_pixels, keys: Layout, values: torch.Tensor) -> torch.Tensor:
-        """forward for inference without the depth term: q, k and v made directly in the layout the kernels read
-        with the heads padded to their block of 4 (fused.padded_heads), so the op copies nothing."""
+        """forward for inference: q, k and v made directly in the layout the kernels read, with the heads padded
+        to their block of 4 (fused.padded_heads), so the op copies nothing."""
         H, hp = self.heads, fused.padded_heads(self.heads)
         (q,) = fused.ln_linear(q_feat, None, [fused.head_padded(self.q, self.head_dim, H, hp)])
         (k,) = fused.ln_linear(k_feat, None, [fused.head_padded(self.k, self.head_dim, H, hp)])
@@ -96,52 +65,41 @@ class KernelAttention(nn.Module):
         return out
 
 
-DEPTH_W0 = math.log(20.0)   # the depth term's starting w: (a 10% depth step)^2 x 20 = 0.2 logits, nearly off
-DEPTH_GAIN = 20.0
-
-
 class Reconstruction(nn.Module):
     """One output layer's reconstruction module (number of scales, radii and dropout pattern per layer)."""
 
     def __init__(self, dim: int, scales: int = 3, heads: int = 2, head_dim: int = 8, radius: float = 2.5,
-                 radius_growth: float = 1.0, backend: str = "auto", depth_term: bool = False):
+                 radius_growth: float = 1.0, backend: str = "auto"):
         super().__init__()
         self.scales = scales
         radii = [radius + radius_growth * s for s in range(scales)]
-        self.down = nn.ModuleList(KernelAttention(dim, heads, head_dim, radii[s], backend, depth_term)
-                                  for s in range(scales - 1))
-        self.per_scale = nn.ModuleList(KernelAttention(dim, heads, head_dim, radii[s], backend, depth_term)
-                                       for s in range(scales))
+        self.down = nn.ModuleList(KernelAttention(dim, heads, head_dim, radii[s], backend) for s in range(scales - 1))
+        self.per_scale = nn.ModuleList(KernelAttention(dim, heads, head_dim, radii[s], backend) for s in range(scales))
         self.mixer = nn.Linear(dim, scales)
 
-    def forward(self, feat: torch.Tensor, layout: Layout, noisy: torch.Tensor,
-                depth: torch.Tensor | None = None) -> torch.Tensor:
-        """feat [N, dim] backbone embeddings, noisy [N, C] layer values (any C: AOVs batch here) -> [N, C];
-        depth [N]: the bins' log depths (ModelInputs.log_depth; needed with the depth term)."""
-        feats, layouts, images, depths = [feat], [layout], [noisy], [depth]
+    def forward(self, feat: torch.Tensor, layout: Layout, noisy: torch.Tensor) -> torch.Tensor:
+        """feat [N, dim] backbone embeddings, noisy [N, C] layer values (any C: AOVs batch here) -> [N, C]."""
+        feats, layouts, images = [feat], [layout], [noisy]
         for s in range(self.scales - 1):  # stage 1: the pyramid of blurred layers
             kept, coarse = bin_dropout(layouts[-1], s % 2)
             q_feat = feats[-1][kept]
-            q_depth = None if depth is None else depths[-1][kept]
-            images.append(self.down[s](q_feat, feats[-1], coarse.pixels, layouts[-1], images[-1], q_depth,
-                                       depths[-1]))
+            images.append(self.down[s](q_feat, feats[-1], coarse.pixels, layouts[-1], images[-1]))
             feats.append(q_feat)
             layouts.append(coarse)
-            depths.append(q_depth)
-        outs = [self.per_scale[s](feat, feats[s], layout.pixels, layouts[s], images[s], depth, depths[s])  # stage 2
+        outs = [self.per_scale[s](feat, feats[s], layout.pixels, layouts[s], images[s])  # stage 2
                 for s in range(self.scales)]
         w = torch.softmax(self.mixer(feat), dim=1)  # stage 3: per-bin convex mix of the scales
         return sum(w[:, s:s + 1] * outs[s] for s in range(self.scales))
 
 
 def demodulated(rec: Reconstruction, feat: torch.Tensor, layout: Layout, values: torch.Tensor,
-                modulation: torch.Tensor | None, depth: torch.Tensor | None = None) -> torch.Tensor:
+                modulation: torch.Tensor | None) -> torch.Tensor:
     """rec on values / modulation, times the modulation: values [N, 3k] (k RGB triplets, e.g. AOVs batched),
     modulation [N, 3] or None (then rec alone)."""
     if modulation is None:
-        return rec(feat, layout, values, depth)
+        return rec(feat, layout, values)
     m = per_channel(modulation, values)
-    return m * rec(feat, layout, values / m, depth)
+    return m * rec(feat, layout, values / m)
 
 
 def per_channel(modulation: torch.Tensor, values: torch.Tensor) -> torch.Tensor:

@@ -166,8 +166,7 @@ def unwrap(net):
 def init_single(model, init_name: str) -> None:
     """Starts single-frame `model` from single-frame weights `init_name` of the same architecture, also when the
     feature sets differ (the new feature columns start at zero, so the model begins as the old one would on its
-    shared inputs) and when `model` adds the reconstruction's depth term (its weights keep their start, nearly
-    off)."""
+    shared inputs)."""
     from ..model.inputs import old_columns
     from ..model.store import load_model
 
@@ -181,9 +180,6 @@ def init_single(model, init_name: str) -> None:
     new = w.new_zeros(w.shape[0], model.embed[0].in_features)
     new[:, old_columns(a.features, b.features)] = w
     state["embed.0.weight"] = new
-    own = model.state_dict()
-    if b.depth_kernel and not a.depth_kernel:
-        state.update({k: v for k, v in own.items() if k.endswith(".depth_theta")})
     model.load_state_dict(state)
 
 
