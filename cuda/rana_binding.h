@@ -75,6 +75,8 @@ inline Plan plan_for(int64_t H, int64_t dk, int64_t dv, bool is_double, bool sca
   const int64_t pdk = dk <= 8 ? 8 : dk <= 16 ? 16 : dk <= 32 ? 32 : 64;
   const int64_t pdv = dv <= 3 ? 3 : dv <= 8 ? 8 : dv <= 16 ? 16 : dv <= 32 ? 32 : 64;
   if (H == 1) return Plan{false, 1, 1, pdk, pdv};
+  // two heads: blocks of 2 heads (twice the entries per block), rather than padding to 4 heads, half of them zero
+  if (H == 2) return Plan{false, 2, 2, pdk, pdv};
   return Plan{false, 4, (H + 3) / 4 * 4, pdk, pdv};
 }
 

@@ -118,6 +118,7 @@ void with_kernel(const Plan& pl, F&& f) {
   if (pl.scalar) return f.template operator()<T, 1>();
   if constexpr (std::is_same_v<T, float>) {
     if (pl.HB == 4) return f.template operator()<rana::f32v, 4>();
+    if (pl.HB == 2) return f.template operator()<rana::f32v, 2>();
   }
   return f.template operator()<typename VecFor<T>::V, 1>();
 }

@@ -238,6 +238,7 @@ void backward_dkdv(const rana::Op<T>& op, const T* qst, const T* dost, const T* 
 
 #define RANA_CPU_EXTERN extern
 RANA_CPU_KERNELS(RANA_CPU_EXTERN, float, rana::f32v, 4)
+RANA_CPU_KERNELS(RANA_CPU_EXTERN, float, rana::f32v, 2)
 RANA_CPU_KERNELS(RANA_CPU_EXTERN, float, rana::f32v, 1)
 RANA_CPU_KERNELS(RANA_CPU_EXTERN, double, rana::f64v, 1)
 RANA_CPU_KERNELS(RANA_CPU_EXTERN, float, float, 1)

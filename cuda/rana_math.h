@@ -574,7 +574,21 @@ RANA_HD V load_chunk(const typename Lanes<V>::T* p) {
       return reinterpret_cast<const V&>(c);
     }
 #endif
+#if defined(__AVX512F__) && !defined(__CUDACC__)
+    if constexpr (L == 16 && HB == 2 && sizeof(T) == 4) {  // the 2 floats as one double, broadcast
+      double pair;
+      std::memcpy(&pair, p, sizeof(pair));
+      const __m512 c = _mm512_castpd_ps(_mm512_set1_pd(pair));
+      return reinterpret_cast<const V&>(c);
+    }
+#endif
 #if defined(__AVX2__) && !defined(__CUDACC__)
+    if constexpr (L == 8 && HB == 2 && sizeof(T) == 4) {
+      double pair;
+      std::memcpy(&pair, p, sizeof(pair));
+      const __m256 c = _mm256_castpd_ps(_mm256_set1_pd(pair));
+      return reinterpret_cast<const V&>(c);
+    }
     if constexpr (L == 8 && HB == 4 && sizeof(T) == 4) {  // one vbroadcastf128 from memory
       const __m256 c = _mm256_broadcast_ps(reinterpret_cast<const __m128*>(p));
       return reinterpret_cast<const V&>(c);

@@ -76,9 +76,9 @@ def mlp(x: torch.Tensor, norm: nn.LayerNorm | None, first: nn.Linear, second: nn
 
 
 def padded_heads(heads: int) -> int:
-    """The heads the C++ kernels run for `heads` (blocks of 4 heads, a single head alone): padding them in the
-    projections spares the op a padded copy of every operand."""
-    return heads if heads == 1 else (heads + 3) // 4 * 4
+    """The heads the C++ kernels run for `heads` (blocks of 4 heads; 1 or 2 heads as they are): padding them in
+    the projections spares the op a padded copy of every operand."""
+    return heads if heads <= 2 else (heads + 3) // 4 * 4
 
 
 class Affine(NamedTuple):
