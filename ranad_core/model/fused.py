@@ -1,4 +1,4 @@
-"""Inference fast path of the per-bin layers: LayerNorm, linear layers, the MLP and residual adds fused row by row
+"""Inference fast path of the per-bin layers: LayerNorm, linear layers, the MLP and residual adds fused tile by tile
 in the C++ extension (cuda/rows_cpu.cpp), one pass over the bins instead of one per torch op.
 
 The layers themselves stay ordinary torch modules (training, gradients, the reference backend use them as they
