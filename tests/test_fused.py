@@ -109,3 +109,22 @@ def test_model_output_equals_the_plain_modules(config, monkeypatch):
         assert len(calls) == n
     for k in plain:
         close(fast[k], plain[k], 1e-4)
+
+
+def test_cross_frame_model_equals_the_plain_modules(monkeypatch):
+    """The sequence default's kind of model (guarded matching: the neighbours' key MLP and the pair scores take the
+    fused path too) on a 3-frame window, with and without the path."""
+    from model_factory import demodulating, matching_config
+    from ranad_core.denoise import denoise_window
+    from ranad_core.model.crossframe import CrossFrameRaNAD
+
+    torch.manual_seed(0)
+    single = RaNAD(demodulating(get_config("cpu-small")), feature_dim()).eval()
+    model = CrossFrameRaNAD.from_single(single, demodulating(matching_config(guard=True)), feature_dim()).eval()
+    for g in model.temporal_gate.values():      # open the temporal step, so its result counts
+        torch.nn.init.constant_(g.bias, 0.0)
+    frames = [read_deep(FRAME.parent / f"noisy_spp16.{i:04d}.exr") for i in range(3)]
+    fast = denoise_window(model, frames, 1).image.values
+    monkeypatch.setenv("RANAD_NO_FUSED", "1")
+    plain = denoise_window(model, frames, 1).image.values
+    close(torch.from_numpy(fast), torch.from_numpy(plain), 1e-4)
