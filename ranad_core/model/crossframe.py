@@ -154,7 +154,7 @@ class CrossFrameRaNAD(nn.Module):
             own = self.single.backbone(self.single.embed_features(with_frame_id(c, 0)), c.layout)
             if len(frames) == 1:
                 return [own]
-            feats = [self._temporal_embed(with_frame_id(f, i - centre)) for i, f in enumerate(frames)]
+            feats = [fused.relu_mlp(self.temporal_embed, with_frame_id(f, i - centre)) for i, f in enumerate(frames)]
             if self.config.temporal_guard:   # the guides travel in the embeddings, so the AOV cache keeps them
                 feats = [torch.cat([e, guides(f.features, self.config.features)], 1) for e, f in zip(feats, frames)]
             feats[centre] = torch.cat([own, feats[centre]], 1)
@@ -167,11 +167,6 @@ class CrossFrameRaNAD(nn.Module):
             if len(frames) > 1:
                 feats = self.tmix[k](feats, layouts, keys, gather)
         return feats
-
-    def _temporal_embed(self, x: torch.Tensor) -> torch.Tensor:
-        """The input keys' MLP of features [N, F] (the fused inference path where it applies, fused.py)."""
-        e = self.temporal_embed
-        return fused.mlp(x, None, e[0], e[2], False) if fused.active(x) else e(x)
 
     def embedding_width(self, is_centre: bool, frames: int) -> int:
         """Width of a window frame's embedding (see embeddings): the centre's [backbone | keys] with input keys in

@@ -10,7 +10,6 @@ kernels built, and the RaNA backend not forced to the reference. Results equal t
 from __future__ import annotations
 
 import os
-from typing import NamedTuple
 
 import torch
 from torch import nn
@@ -42,7 +41,7 @@ def _norm_args(norm: nn.LayerNorm | None):
 
 
 def ln_linear(x: torch.Tensor, norm: nn.LayerNorm | None, linears: list) -> list:
-    """[linear(norm(x)) for linear in linears] (nn.Linear or Affine), one pass (norm None: no LayerNorm)."""
+    """[linear(norm(x)) for linear in linears], one pass (norm None: no LayerNorm)."""
     w, b, eps = _norm_args(norm)
     wt = torch.cat([lin.weight for lin in linears]).t().contiguous()
     bias = torch.cat([lin.bias for lin in linears])
@@ -67,6 +66,11 @@ def merge_residual(skip: torch.Tensor, y: torch.Tensor, out: nn.Linear, merge: n
                                        folded.t().contiguous(), bias)
 
 
+def relu_mlp(seq: nn.Sequential, x: torch.Tensor) -> torch.Tensor:
+    """seq(x) for an nn.Sequential(Linear, ReLU, Linear) (input embeddings, pair scores): fused where `active`."""
+    return mlp(x, None, seq[0], seq[2], False) if active(x) else seq(x)
+
+
 def mlp(x: torch.Tensor, norm: nn.LayerNorm | None, first: nn.Linear, second: nn.Linear,
         residual: bool) -> torch.Tensor:
     """[x +] second(relu(first(norm(x))))."""
@@ -74,30 +78,3 @@ def mlp(x: torch.Tensor, norm: nn.LayerNorm | None, first: nn.Linear, second: nn
     return _ext().rows_mlp(_rows(x), w, b, eps, first.weight.t().contiguous(), first.bias,
                            second.weight.t().contiguous(), second.bias, residual)
 
-
-def padded_heads(heads: int) -> int:
-    """The heads the C++ kernels run for `heads` (blocks of 4 heads; 1 or 2 heads as they are): padding them in
-    the projections spares the op a padded copy of every operand."""
-    return heads if heads <= 2 else (heads + 3) // 4 * 4
-
-
-class Affine(NamedTuple):
-    """A linear layer's parameters (weight [out, in], bias [out]), as ln_linear takes them besides nn.Linear."""
-    weight: torch.Tensor
-    bias: torch.Tensor
-
-    @property
-    def out_features(self) -> int:
-        return self.weight.shape[0]
-
-
-def head_padded(linear: nn.Linear, head_dim: int, heads: int, padded: int):
-    """`linear`, whose outputs are channel-major [head_dim, heads], with zero outputs for heads heads..padded-1
-    (an Affine): its output viewed [head_dim, padded] holds zero heads, which change no kept head's result."""
-    if padded == heads:
-        return linear
-    w = linear.weight.new_zeros(head_dim, padded, linear.in_features)
-    w[:, :heads] = linear.weight.view(head_dim, heads, -1)
-    b = linear.bias.new_zeros(head_dim, padded)
-    b[:, :heads] = linear.bias.view(head_dim, heads)
-    return Affine(w.view(head_dim * padded, -1), b.view(-1))

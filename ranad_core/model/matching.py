@@ -84,9 +84,7 @@ class MatchKernel(nn.Module):
         them (None: pixel_pairs(q_pixels, keys), all of them)."""
         qi, kj = pixel_pairs(q_pixels, keys) if pairs is None else pairs
         a, b = self.proj(q_feat)[qi], self.proj(k_feat)[kj]
-        pair = torch.cat([(a - b).abs(), a * b], 1)
-        first, second = self.score[0], self.score[2]
-        logits = (fused.mlp(pair, None, first, second, False) if fused.active(pair) else self.score(pair)).squeeze(1)
+        logits = fused.relu_mlp(self.score, torch.cat([(a - b).abs(), a * b], 1)).squeeze(1)
         if own is not None:
             logits = logits + self.self_bonus * (kj == own[qi]).to(logits.dtype)
         w = segment_softmax(logits, qi, q_feat.shape[0])

@@ -36,7 +36,7 @@ class RaNAD(nn.Module):
 
     def embed_features(self, x: torch.Tensor) -> torch.Tensor:
         """The input embedding of features [N, F] (the fused inference path where it applies, fused.py)."""
-        return fused.mlp(x, None, self.embed[0], self.embed[2], False) if fused.active(x) else self.embed(x)
+        return fused.relu_mlp(self.embed, x)
 
     def modulation(self, name: str, inputs: ModelInputs):
         """What layer `name`'s values are demodulated by for these inputs (None: not demodulated)."""

@@ -49,15 +49,13 @@ class KernelAttention(nn.Module):
         return (y * torch.softmax(self.head_mix, 0)[None, :, None]).sum(1)
 
     def _fused_forward(self, q_feat, k_feat, q_pixels, keys: Layout, values: torch.Tensor) -> torch.Tensor:
-        """forward for inference: q, k and v made directly in the layout the kernels read, with the heads padded
-        to their block of 4 (fused.padded_heads), so the op copies nothing."""
-        H, hp = self.heads, fused.padded_heads(self.heads)
-        (q,) = fused.ln_linear(q_feat, None, [fused.head_padded(self.q, self.head_dim, H, hp)])
-        (k,) = fused.ln_linear(k_feat, None, [fused.head_padded(self.k, self.head_dim, H, hp)])
-        q, k = (x.view(len(x), self.head_dim, hp).transpose(1, 2) for x in (q, k))
-        v = values[:, :, None].expand(-1, -1, hp).contiguous().transpose(1, 2)   # channel-major [N, hp, C]
-        bias = self.bias if hp == H else torch.cat([self.bias, self.bias.new_zeros(hp - H, *self.bias.shape[1:])])
-        y = rana(q, k, v, q_pixels, keys.offsets, keys.size, self.radius, bias, backend=self.backend)
+        """forward for inference: q and k from the fused projection, v made channel-major (the layout the kernels
+        stream), so the op copies no operand."""
+        H, d = self.heads, self.head_dim
+        (q,), (k,) = fused.ln_linear(q_feat, None, [self.q]), fused.ln_linear(k_feat, None, [self.k])
+        q, k = (x.view(len(x), d, H).transpose(1, 2) for x in (q, k))
+        v = values[:, :, None].expand(-1, -1, H).contiguous().transpose(1, 2)   # channel-major [N, H, C]
+        y = rana(q, k, v, q_pixels, keys.offsets, keys.size, self.radius, self.bias, backend=self.backend)
         mix = torch.softmax(self.head_mix, 0)
         out = y[:, 0] * mix[0]
         for h in range(1, H):
