@@ -26,7 +26,8 @@ struct QueryOrder {
 
 QueryOrder order_queries(const torch::Tensor& qpix, int64_t Hk, int64_t Wk) {
   const auto pix = qpix.select(1, 0) * Wk + qpix.select(1, 1);
-  const auto order = std::get<1>(torch::sort(pix, /*stable=*/true));
+  // the stable overload named in full: a bare `true` converts to the int64 `dim` of the other overload (dim 1)
+  const auto order = std::get<1>(torch::sort(pix, c10::optional<bool>(true), /*dim=*/0, /*descending=*/false));
   const auto counts = torch::bincount(pix, {}, Hk * Wk);
   const auto ptr = torch::cat({torch::zeros({1}, counts.options()), torch::cumsum(counts, 0)});
   return QueryOrder{order, ptr.to(torch::kInt64).contiguous()};
@@ -35,7 +36,8 @@ QueryOrder order_queries(const torch::Tensor& qpix, int64_t Hk, int64_t Wk) {
 // Each key bin's (y, x) from the grid's offsets.
 torch::Tensor key_pixels(const torch::Tensor& k_offsets, int64_t Hk, int64_t Wk, int64_t nk) {
   const auto counts = k_offsets.narrow(0, 1, Hk * Wk) - k_offsets.narrow(0, 0, Hk * Wk);
-  const auto pix = torch::repeat_interleave(torch::arange(Hk * Wk, k_offsets.options()), counts, nk);
+  const auto pix = torch::repeat_interleave(torch::arange(Hk * Wk, k_offsets.options()), counts, /*dim=*/0,
+                                           /*output_size=*/nk);
   return torch::stack({torch::div(pix, Wk, "floor"), torch::remainder(pix, Wk)}, 1).contiguous();
 }
 
