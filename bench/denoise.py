@@ -7,10 +7,11 @@ same run measures two baselines on the same frame: reading and writing it withou
 and flat OIDN on the flattened frame (what a flat denoiser costs).
 
 Usage: python bench/denoise.py [--threads 2] [--real ../shared/data/deep-real/LeftView_Trunks.exr] [--model M]
-           [--frame SRC.exr] [--args "--max-memory 4G" --args "--halo 16" ...]
+           [--frame SRC.exr] [--args "--max-memory 4G" --args "--halo 16" ...] [--device cuda]
 `--frame` tiles that deep frame to 1920x1080 instead of rendering one (e.g. a held-out 16-spp deep-Z frame of
 `ranad synth --preset glass`); each `--args` adds one more `ranad denoise` run with those options (peak memory
-and time side by side with the default run; `--profile` in them prints the stage table).
+and time side by side with the default run; `--profile` in them prints the stage table). `--device cuda` runs
+ranad and the flat OIDN baseline on the GPU.
 """
 
 from __future__ import annotations
@@ -92,12 +93,16 @@ IO_ONLY = ("from ranad_core.exr import read_deep, write_deep; img = read_deep(sy
 OIDN = ("import numpy as np, pyoidn; from ranad_core.exr import read_deep; from ranad_core import metrics; "
         "img = read_deep(sys.argv[2]); flat = np.ascontiguousarray(metrics.flat_rgb(img), np.float32); "
         "pyoidn.denoise(np.maximum(flat, 0), hdr=True)")
+# flat OIDN on the GPU (pyoidn's CUDA device takes torch CUDA tensors), the upload and download included
+OIDN_CUDA = ("import numpy as np, pyoidn, torch; from ranad_core.exr import read_deep; from ranad_core import metrics; "
+             "img = read_deep(sys.argv[2]); flat = np.ascontiguousarray(metrics.flat_rgb(img), np.float32); "
+             "pyoidn.denoise(torch.from_numpy(np.maximum(flat, 0)).cuda(), hdr=True).cpu()")
 
 
-def bench(path: str, label: str, folder: str, threads: int, model: str | None, variants=()) -> None:
+def bench(path: str, label: str, folder: str, threads: int, model: str | None, variants=(), device="cpu") -> None:
     img = read_deep(path)
     out = os.path.join(folder, "out.exr")
-    args = [path, "-o", out, "--threads", str(threads)] + (["--model", model] if model else [])
+    args = [path, "-o", out, "--threads", str(threads), "--device", device] + (["--model", model] if model else [])
     den = run_measured(DENOISE, *args, threads=threads)
     others = []
     for v in variants:  # a variant may be refused (a --max-memory too small for the frame): its error is the result
@@ -109,11 +114,11 @@ def bench(path: str, label: str, folder: str, threads: int, model: str | None, v
     io = run_measured(IO_ONLY, path, os.path.join(folder, "io.exr"), threads=threads)
     try:
         import pyoidn  # noqa: F401
-        oidn = run_measured(OIDN, path, threads=threads)
+        oidn = run_measured(OIDN_CUDA if device == "cuda" else OIDN, path, threads=threads)
     except ImportError:
         oidn = None
     print(f"\n{label}: {img.width}x{img.height}, {img.num_bins} bins ({img.num_bins / img.num_pixels:.2f}/pixel), "
-          f"{len(img.channels)} channels, {threads} threads")
+          f"{len(img.channels)} channels, {threads} threads, device {device}")
     print(f"  ranad denoise     {den['seconds']:7.1f} s   peak {den['peak_mb']:7.0f} MB")
     print(f"  read+write only   {io['seconds']:7.1f} s   peak {io['peak_mb']:7.0f} MB   "
           f"(denoise = {den['seconds'] / io['seconds']:.1f}x the I/O floor)")
@@ -139,6 +144,8 @@ def main() -> None:
     ap.add_argument("--skip-1080p", action="store_true")
     ap.add_argument("--frame", default=None, help="a deep frame to tile to 1080p instead of rendering one")
     ap.add_argument("--args", action="append", default=[], help="options of one more ranad denoise run")
+    ap.add_argument("--device", choices=("cpu", "cuda"), default="cpu",
+                    help="where ranad denoise and the flat OIDN baseline run")
     a = ap.parse_args()
     with tempfile.TemporaryDirectory() as folder:
         if not a.skip_1080p:
@@ -146,9 +153,9 @@ def main() -> None:
             path = make_1080p(folder, a.frame)
             print(f"made the 1080p frame in {time.perf_counter() - t:.1f} s")
             label = f"1080p tiled from {a.frame}" if a.frame else "1080p synth (deep-heavy, 16 spp)"
-            bench(path, label, folder, a.threads, a.model, a.args)
+            bench(path, label, folder, a.threads, a.model, a.args, a.device)
         if a.real and os.path.isfile(a.real):
-            bench(a.real, os.path.basename(a.real), folder, a.threads, a.model, a.args)
+            bench(a.real, os.path.basename(a.real), folder, a.threads, a.model, a.args, a.device)
 
 
 if __name__ == "__main__":

@@ -34,7 +34,9 @@ def parse_bytes(text: str) -> float:
                                             "(default: the shipped cross-frame model for sequences, the "
                                             "single-frame one otherwise).")
 @click.option("--device", type=click.Choice(["auto", "cpu", "cuda"]), default="auto", show_default=True,
-              help="Where the model runs (auto: cpu until the CUDA RaNA kernels are available).")
+              help="Where the model and the flat prior's OIDN run (auto: the GPU when torch sees one and the CUDA "
+                   "RaNA kernels build for it, else the CPU; cuda: the GPU or an error saying what is missing). "
+                   "Reading, input preparation and writing stay on the CPU.")
 @click.option("--threads", type=click.IntRange(1), default=None, help="CPU threads (default: all cores).")
 @click.option("--kind", type=click.Choice(["auto", "deepz", "deepoid"]), default="auto", show_default=True,
               help="What every frame must be: deepz, or deepoid (an id channel gives every bin of a pixel its own "
@@ -117,9 +119,10 @@ def denoise_cmd(inputs, output, frames, model, device, threads, kind, maps, pres
     from ranad_core.model.store import load_model, training_window
     from ranad_core.shot import ShotOptions, denoise_shot, first_frame, prescan
 
+    from ranad_core.device import resolve
+
     budget = parse_bytes(max_memory)
-    if device == "cuda":  # auto runs on the CPU until the CUDA kernels land (issue 9)
-        raise RanadError("the CUDA RaNA kernels are not available in this build; use --device cpu", "--device")
+    run_on = resolve(device)
     if threads:
         torch.set_num_threads(threads)
     overrides = mapping_options(maps, preset, motion_units, fps, shutter, motion_y)
@@ -152,13 +155,15 @@ def denoise_cmd(inputs, output, frames, model, device, threads, kind, maps, pres
 
         model = default_model_for([f.frame for f in sequence], window)
     loaded = load_model(model)
+    loaded.model.to(run_on)
     opts.model_spec, opts.window = model, window or training_window(loaded)
     _, mapping, found, labels = first_frame(frames_list[0].path, opts)
     click.echo(f"model {loaded.model_id}; {'deep-OID' if found == 'deepoid' else 'deep-Z'} input"
                f"{'' if kind == 'auto' else ' (--kind ' + kind + ', checked on every frame)'}; "
                + (f"parts: {', '.join(labels)} (the others copied); " if labels else "")
                + f"channels: {mapping.mode()}; motion: {mapping.motion.describe()}"
-               + (f"; per-pixel flow: {flow} (to the {flow_direction} frame)" if flow else ""), err=True)
+               + (f"; per-pixel flow: {flow} (to the {flow_direction} frame)" if flow else "")
+               + f"; device: {run_on.type}", err=True)
     scores = []
 
     def on_frame(job, img, result):

@@ -97,6 +97,7 @@ def denoise_aovs(model, images: list, centre: int, mapping: ChannelMap, layers: 
     from .motion import compensate
 
     cross = is_cross_frame(model)
+    dev = next(model.parameters()).device   # the kernels run where the model is, as in the primary pass
     moved, _ = compensate(images, centre, flows, mapping.motion) if len(images) > 1 else (images, 0)
     h, w = images[centre].height, images[centre].width
     vals, window = [], []
@@ -104,11 +105,11 @@ def denoise_aovs(model, images: list, centre: int, mapping: ChannelMap, layers: 
         srt, srt_perm = canonical(img, mapping)[0].sorted()
         if len(srt_perm) != len(perms[k]) or not np.array_equal(srt_perm, perms[k]):
             raise RanadError("the AOV frames do not match the cached bin layout (another render?)", None)
-        vals.append(_values(img, mapping, layers, perms[k]))
+        vals.append({name: t.to(dev) for name, t in _values(img, mapping, layers, perms[k]).items()})
         layout = Layout.of(torch.as_tensor(offsets[k]), h, w)
         mod = modulation(srt)   # what the primary pass demodulated the diffuse layer by (demodulating models)
-        window.append(ModelInputs(layout, None, {}, None if mod is None else torch.from_numpy(mod)))
-    feats = [torch.from_numpy(np.asarray(e, np.float16)).float() for e in embeddings]
+        window.append(ModelInputs(layout, None, {}, None if mod is None else torch.from_numpy(mod)).to(dev))
+    feats = [torch.from_numpy(np.asarray(e, np.float16)).float().to(dev) for e in embeddings]
     total = vals[centre]["diffuse"].shape[1]
     denoised = {"diffuse": [], "specular": []}
     with torch.inference_mode():
@@ -126,7 +127,7 @@ def denoise_aovs(model, images: list, centre: int, mapping: ChannelMap, layers: 
                     res = model.reconstruct_layer(name, feats[0], window[0], vals[0][name][:, a:b])
                 denoised[name].append(res)
     total_out = (torch.cat(denoised["diffuse"], 1) + torch.cat(denoised["specular"], 1) + vals[centre]["pass"])
-    out = unsort(total_out.numpy(), perms[centre])
+    out = unsort(total_out.cpu().numpy(), perms[centre])
     return {layer: out[:, 3 * i:3 * i + 3] for i, layer in enumerate(layers)}
 
 

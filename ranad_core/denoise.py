@@ -253,7 +253,20 @@ def denoise_window(model, images: list, centre: int, mapping: ChannelMap | None 
     A cross-frame model on the flat prior gets every frame's prior made on that frame before compensation and
     carried with its bins (FramePrior); `priors`: per window frame, its FramePrior or None, a list the caller
     keeps across the windows of a shot (shot.py) and this fills in where None. `keep_depth`: the depth layer is
-    not reconstructed and the file's depths are written as they are."""
+    not reconstructed and the file's depths are written as they are.
+
+    Tiles run where the model is (`model.to("cuda")`: `ranad denoise --device cuda`), and so does the flat prior's
+    OIDN; inputs are prepared and outputs assembled on the CPU."""
+    from .model.prior import oidn_on
+
+    device = next(model.parameters()).device
+    with oidn_on(device.type):
+        return _denoise_window(model, images, centre, mapping, tile, halo, keep_noisy, want_embeddings, progress,
+                               flows, priors, keep_depth, device)
+
+
+def _denoise_window(model, images, centre, mapping, tile, halo, keep_noisy, want_embeddings, progress, flows,
+                    priors, keep_depth, device) -> FrameResult:
     from .motion import compensate
 
     cross = is_cross_frame(model)
@@ -295,7 +308,7 @@ def denoise_window(model, images: list, centre: int, mapping: ChannelMap | None 
             with stage("tiles/gather"):
                 parts = [_tile_inputs(fr, win, w) for fr in frames]
             if parts[centre][1].size:
-                window = [p[0] for p in parts]
+                window = [p[0].to(device) for p in parts]
                 if keep_depth:   # a layer the inputs do not carry is not reconstructed (nor written back)
                     for inp in window:
                         inp.layers.pop("depth", None)
@@ -319,13 +332,13 @@ def denoise_window(model, images: list, centre: int, mapping: ChannelMap | None 
                     for k, v in pred.items():
                         if k not in outs:
                             outs[k] = np.zeros((n, v.shape[1]), np.float32)
-                        outs[k][dst] = v.numpy()[keep]
+                        outs[k][dst] = v.cpu().numpy()[keep]
                     if want_embeddings:
                         for f, (fr, (_, idx, local)) in enumerate(zip(frames, parts)):
                             if embs[f] is None:
                                 embs[f] = np.zeros((fr.srt.num_bins, feats[f].shape[1]), np.float16)
                             kf = _core_mask(local, win, core)
-                            embs[f][idx[kf]] = feats[f].numpy()[kf].astype(np.float16)
+                            embs[f][idx[kf]] = feats[f].cpu().numpy()[kf].astype(np.float16)
                 record_tile(sum(int(p[1].size) for p in parts), int(keep.sum()), time.perf_counter() - t_tile)
         if progress:
             progress(1)

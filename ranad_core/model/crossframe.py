@@ -61,7 +61,7 @@ def temporal_layout(layouts: list) -> tuple[Layout, torch.Tensor, torch.Tensor]:
 
 
 def with_frame_id(inputs: ModelInputs, offset: int) -> torch.Tensor:
-    onehot = torch.zeros(inputs.features.shape[0], FRAME_FEATURES)
+    onehot = inputs.features.new_zeros(inputs.features.shape[0], FRAME_FEATURES)
     onehot[:, offset + MAX_OFFSET] = 1
     return torch.cat([inputs.features, onehot], 1)
 
@@ -182,7 +182,7 @@ class CrossFrameRaNAD(nn.Module):
         the pair scores run on few), and the keys without their guides ("feats")."""
         c = frames[centre]
         rows = torch.empty_like(gather)
-        rows[gather] = torch.arange(gather.numel())
+        rows[gather] = torch.arange(gather.numel(), device=gather.device)
         first = sum(f.layout.bins for f in frames[:centre])
         own_rows = rows[first:first + c.layout.bins]
         pairs = pixel_pairs(c.layout.pixels, keys)

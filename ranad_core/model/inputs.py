@@ -49,6 +49,12 @@ class ModelInputs:
     def feature_dim(self) -> int:
         return self.features.shape[1]
 
+    def to(self, device) -> "ModelInputs":
+        """These inputs on `device` (tiles are prepared on the CPU and moved to the model's device)."""
+        return ModelInputs(self.layout.to(device), None if self.features is None else self.features.to(device),
+                           {k: v.to(device) for k, v in self.layers.items()},
+                           None if self.modulation is None else self.modulation.to(device))
+
 
 FEATURE_SETS = ("log1p", "prior")
 

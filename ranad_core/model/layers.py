@@ -38,6 +38,9 @@ class Layout:
     def bins(self) -> int:
         return int(self.offsets[-1])
 
+    def to(self, device) -> "Layout":
+        return Layout(self.offsets.to(device), self.height, self.width, self.pixels.to(device))
+
 
 def bin_dropout(layout: Layout, pattern: int) -> tuple[torch.Tensor, Layout]:
     """Deterministic bin dropout (down-sampling): bin b of pixel (y, x) is kept when b + y + x + pattern is even.
@@ -49,7 +52,7 @@ def bin_dropout(layout: Layout, pattern: int) -> tuple[torch.Tensor, Layout]:
     offs = layout.offsets
     counts = offs[1:] - offs[:-1]
     pix = layout.pixels[:, 0] * layout.width + layout.pixels[:, 1]
-    within = torch.arange(layout.bins) - torch.repeat_interleave(offs[:-1], counts, output_size=layout.bins)
+    within = torch.arange(layout.bins, device=offs.device) - torch.repeat_interleave(offs[:-1], counts, output_size=layout.bins)
     keep = (within + layout.pixels[:, 0] + layout.pixels[:, 1] + pattern) % 2 == 0
     kept = torch.nonzero(keep, as_tuple=False).flatten()
     coarse = torch.bincount(pix[kept], minlength=counts.numel())

@@ -39,9 +39,9 @@ def pixel_pairs(q_pixels: torch.Tensor, keys: Layout) -> tuple[torch.Tensor, tor
 
 def segment_softmax(logits: torch.Tensor, seg: torch.Tensor, segments: int) -> torch.Tensor:
     """Softmax of logits [P] within each segment (seg [P] in 0..segments-1)."""
-    top = torch.full((segments,), float("-inf"), dtype=logits.dtype).scatter_reduce(0, seg, logits, "amax")
+    top = logits.new_full((segments,), float("-inf")).scatter_reduce(0, seg, logits, "amax")
     e = torch.exp(logits - top[seg])
-    return e / torch.zeros(segments, dtype=logits.dtype).index_add(0, seg, e)[seg]
+    return e / logits.new_zeros(segments).index_add(0, seg, e)[seg]
 
 
 # The guard (configs with `temporal_guard`): a neighbour's bin is a candidate only where it shows what the query
@@ -58,7 +58,7 @@ PRIOR_FLOOR = 0.01        # in units of the frame's exposure scale: below it, di
 
 def consistent(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
     """[P] whether guide rows a [P, GUIDE_WIDTH] and b (inputs.guides) agree within GUARD and PRIOR_TOLERANCE."""
-    ok = torch.ones(a.shape[0], dtype=torch.bool)
+    ok = torch.ones(a.shape[0], dtype=torch.bool, device=a.device)
     for name, tol in GUARD.items():
         cols = GUIDE_LAYOUT[name]
         ok &= (a[:, cols] - b[:, cols]).abs().amax(1) <= tol
@@ -88,5 +88,5 @@ class MatchKernel(nn.Module):
         if own is not None:
             logits = logits + self.self_bonus * (kj == own[qi]).to(logits.dtype)
         w = segment_softmax(logits, qi, q_feat.shape[0])
-        return torch.zeros(q_feat.shape[0], values.shape[1], dtype=values.dtype).index_add(
+        return values.new_zeros(q_feat.shape[0], values.shape[1]).index_add(
             0, qi, w.unsqueeze(1).to(values.dtype) * values[kj])

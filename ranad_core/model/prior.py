@@ -14,7 +14,12 @@
 
 from __future__ import annotations
 
+import contextlib
+import contextvars
+import warnings
+
 import numpy as np
+
 from ..channels import ALBEDO, DIFFUSE, EMISSION, FLAT_NOISY, NORMAL, PRIOR, PRIOR_NOAUX, RGB, SPECULAR
 from ..baselines import composite_columns
 from ..deep import DeepImage
@@ -48,6 +53,22 @@ def exposure_scale(flat_rgb: np.ndarray) -> float:
     return float(np.median(lum))
 
 
+# Where OIDN runs: "cpu", or "cuda" while a model on the GPU denoises (denoise_window sets it, so `ranad denoise
+# --device cuda` runs the prior on the GPU too). pyoidn takes torch CUDA tensors and picks its CUDA device for them.
+OIDN_DEVICE: contextvars.ContextVar[str] = contextvars.ContextVar("oidn_device", default="cpu")
+_gpu_failed: list = []
+
+
+@contextlib.contextmanager
+def oidn_on(device_type: str):
+    """Run the flat prior's OIDN on `device_type` ("cpu" or "cuda") inside the block."""
+    token = OIDN_DEVICE.set(device_type)
+    try:
+        yield
+    finally:
+        OIDN_DEVICE.reset(token)
+
+
 def _oidn(colour: np.ndarray, albedo: np.ndarray | None, normal: np.ndarray | None) -> np.ndarray:
     try:
         import pyoidn
@@ -58,6 +79,17 @@ def _oidn(colour: np.ndarray, albedo: np.ndarray | None, normal: np.ndarray | No
         aux["albedo"] = albedo
         if normal is not None:
             aux["normal"] = normal
+    if OIDN_DEVICE.get() == "cuda" and not _gpu_failed:
+        import torch
+
+        try:
+            on = {k: torch.from_numpy(v).cuda() for k, v in aux.items()}
+            out = pyoidn.denoise(torch.from_numpy(colour).cuda(), hdr=True, **on)
+            return np.asarray(out.cpu().numpy(), np.float32)
+        except Exception as e:  # noqa: BLE001 - a pyoidn without its CUDA device: the CPU gives the same prior
+            _gpu_failed.append(e)
+            warnings.warn(f"ranad: OIDN could not run on the GPU ({e}); the flat prior runs on the CPU",
+                          RuntimeWarning, stacklevel=2)
     return np.asarray(pyoidn.denoise(colour, hdr=True, **aux), np.float32)
 
 

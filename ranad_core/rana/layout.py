@@ -69,20 +69,21 @@ def concat_frames(offsets_list: list) -> tuple[torch.Tensor, torch.Tensor, torch
     counts = torch.stack([o[1:] - o[:-1] for o in offs])  # [T, P]
     total = counts.sum(0)
     out = torch.cat([total.new_zeros(1), torch.cumsum(total, 0)])
-    base = torch.cumsum(torch.tensor([0] + [int(o[-1]) for o in offs[:-1]]), 0)
+    dev = offs[0].device
+    base = torch.cumsum(torch.tensor([0] + [int(o[-1]) for o in offs[:-1]], device=dev), 0)
     # destination of frame t's bins of pixel p starts at out[p] + sum_{s<t} counts[s, p]
     before = torch.cumsum(counts, 0) - counts  # [T, P]
     n = int(out[-1])
-    gather = torch.empty(n, dtype=torch.int64)
-    frame = torch.empty(n, dtype=torch.int64)
+    gather = torch.empty(n, dtype=torch.int64, device=dev)
+    frame = torch.empty(n, dtype=torch.int64, device=dev)
     for t, o in enumerate(offs):
         c = counts[t]
         m = int(o[-1])
         if m == 0:
             continue
-        pix = torch.repeat_interleave(torch.arange(npix), c, output_size=m)
-        within = torch.arange(m) - o[:-1][pix]
+        pix = torch.repeat_interleave(torch.arange(npix, device=dev), c, output_size=m)
+        within = torch.arange(m, device=dev) - o[:-1][pix]
         dest = out[:-1][pix] + before[t][pix] + within
-        gather[dest] = base[t] + torch.arange(m)
+        gather[dest] = base[t] + torch.arange(m, device=dev)
         frame[dest] = t
     return out, gather, frame
