@@ -21,7 +21,10 @@ from ranad_core.errors import RanadError
 @click.option("--input", "aov_input", default=None, metavar="FILE_OR_PATTERN",
               help="Files holding the AOVs, with the beauty's bin layout (default: the denoised beauty inputs "
                    "recorded in the cache, where light groups usually live).")
-def aov_cmd(cache, pattern, output, aov_input):
+@click.option("--device", type=click.Choice(["auto", "cpu", "cuda"]), default="auto", show_default=True,
+              help="Where the reconstruction runs (as for ranad denoise: auto takes the GPU when torch sees one "
+                   "and the CUDA RaNA kernels build).")
+def aov_cmd(cache, pattern, output, aov_input, device):
     """Denoise the AOV layers matching PATTERN for every frame cached in CACHE (a folder of .ranadcache files or
     one file), rerunning only the reconstruction with the cached embeddings: all AOV channels share each RaNA
     call, and light groups that sum to the noisy beauty sum to the denoised beauty.
@@ -32,11 +35,13 @@ def aov_cmd(cache, pattern, output, aov_input):
     """
     from ranad_core import cache as cache_io
     from ranad_core.aov import denoise_cached_frame
+    from ranad_core.device import resolve
     from ranad_core.exr import write_deep
     from ranad_core.exr.sequence import Frame, format_frame, is_pattern, output_path
     from ranad_core.fileutil import check_writable_target
     from ranad_core.model.store import load_model
 
+    run_on = resolve(device)
     files = sorted(glob.glob(os.path.join(cache, "*" + cache_io.SUFFIX))) if os.path.isdir(cache) else [cache]
     if not files:
         raise RanadError(f"no {cache_io.SUFFIX} files (made by ranad denoise --cache)", cache)
@@ -75,6 +80,7 @@ def aov_cmd(cache, pattern, output, aov_input):
             spec = meta["model"] or None
             if spec not in models:
                 models[spec] = load_model(spec)
+                models[spec].model.to(run_on)
             loaded = models[spec]
             aov_files = [source_of(meta, None if frame is None else frame - int(meta["centre"]) + k, p)
                          for k, p in enumerate(json.loads(meta["window"]))]

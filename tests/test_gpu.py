@@ -42,6 +42,9 @@ def test_without_a_gpu_cuda_is_refused_and_auto_runs_on_the_cpu(tmp_path):
     assert r.exit_code == 2, r.output
     assert "--device: no CUDA GPU is visible" in r.output and len(r.output.strip().splitlines()) == 1
     assert not out.exists()
+    r = CliRunner().invoke(cli, ["aov", str(tmp_path), "--layers", "lg_*", "-o", str(tmp_path / "aov/"),
+                                 "--device", "cuda"])
+    assert r.exit_code == 2 and "--device: no CUDA GPU is visible" in r.output, r.output
 
 
 def _close(a: np.ndarray, b: np.ndarray, what: str) -> None:
