@@ -1,6 +1,6 @@
 """Which device the model runs on: `ranad denoise --device auto|cpu|cuda`.
 
-The GPU path needs three things, each checked here so that a user gets one clear answer rather than a failure
+The GPU path needs two things, each checked here so that a user gets one clear answer rather than a failure
 mid-shot: a CUDA build of torch that sees a GPU, and the CUDA RaNA kernels built for it (without them the GPU
 would run the plain-torch reference, which is slow and memory-hungry). `auto` takes the GPU when all of that
 holds and says why not otherwise; `cuda` makes a missing piece an error.
