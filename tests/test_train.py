@@ -12,6 +12,7 @@ import torch
 from click.testing import CliRunner
 
 from ranad_cli.main import cli
+from ranad_core.errors import RanadError
 from ranad_core.exr import read_deep
 from ranad_core.train.data import find_frame_pairs, find_pairs, sample, sample_consecutive, transform
 from ranad_core.train.losses import temporal_loss
@@ -405,3 +406,36 @@ def test_p_misalign_needs_a_cross_frame_config(tmp_path):
     r = CliRunner().invoke(cli, ["train", str(dataset_from_example(tmp_path / "ds")), "-o", str(tmp_path / "run"),
                                  "--p-misalign", "0.3", "--steps", "1"])
     assert r.exit_code == 2 and "--p-misalign needs a cross-frame config" in r.output
+
+
+def test_a_reconstruction_grown_by_a_scale_starts_from_the_init():
+    """cpu-small-pd3a (three alpha scales) from cpu-small-pd weights: every init weight is kept, the other layers
+    denoise exactly as the init does, the new scale starts with about NEW_SCALE_LOGIT's share of alpha's mix; a
+    config of another shape refuses the init."""
+    from ranad_core.model import RaNAD, feature_dim, get_config
+    from ranad_core.model.store import load_model
+    from ranad_core.train.trainer import NEW_SCALE_LOGIT, grown_reconstruction, init_single
+
+    torch.manual_seed(0)
+    model = RaNAD(get_config("cpu-small-pd3a"), feature_dim("prior")).eval()
+    init_single(model, "cpu-small-pd-v1")
+    init = load_model("cpu-small-pd-v1").model
+    old, new = init.state_dict(), model.state_dict()
+    for k, v in old.items():
+        assert torch.equal(new[k][:len(v)], v), k
+    assert set(new) - set(old) and all(k.startswith("recon.alpha.") for k in set(new) - set(old))
+    assert torch.all(new["recon.alpha.mixer.bias"][2] == NEW_SCALE_LOGIT)
+    assert torch.all(new["recon.alpha.mixer.weight"][2] == 0)
+    img = read_deep(Path(__file__).resolve().parents[1] / "examples" / "synth_shot" / "noisy_spp16.0001.exr")
+    from ranad_core.denoise import denoise_frame
+
+    a, b = denoise_frame(init, img).image, denoise_frame(model, img).image
+    ch = a.channels
+    same = [ch.index(c) for c in ("R", "G", "B", "Z")]
+    assert np.allclose(a.values[:, same], b.values[:, same], rtol=1e-4, atol=1e-6)   # only alpha changed
+    alpha = ch.index("A")
+    assert 0 < np.abs(a.values[:, alpha] - b.values[:, alpha]).max() < 0.05
+    with pytest.raises(RanadError, match="shape"):
+        grown_reconstruction(old, {**old, "recon.alpha.mixer.bias": torch.zeros(1)}, "x")
+    with pytest.raises(RanadError, match="lacks"):
+        grown_reconstruction({k: v for k, v in old.items() if k != "embed.0.bias"}, old, "x")

@@ -101,6 +101,11 @@ CONFIGS["cpu-small-p-xk0"] = ModelConfig(**{**CONFIGS["cpu-small-p-xk"].__dict__
 CONFIGS["cpu-small-pd"] = ModelConfig(**{**CONFIGS["cpu-small-p"].__dict__, "name": "cpu-small-pd",
                                         "demodulate": True})
 
+# cpu-small-pd whose alpha reconstruction has the diffuse layer's three scales (two before): a wider support for
+# the per-bin alpha, whose binomial noise the held-out compositing edit is most sensitive to (issue 24)
+CONFIGS["cpu-small-pd3a"] = ModelConfig(**{**CONFIGS["cpu-small-pd"].__dict__, "name": "cpu-small-pd3a",
+                                          "recon": _recon(alpha={"scales": 3})})
+
 # the input-keyed cross-frame model (radius-0 temporal step, as cpu-small-p-xk0) on cpu-small-pd
 CONFIGS["cpu-small-pd-xk"] = ModelConfig(**{**CONFIGS["cpu-small-p-xk0"].__dict__, "name": "cpu-small-pd-xk",
                                            "demodulate": True})

@@ -180,7 +180,38 @@ def init_single(model, init_name: str) -> None:
     new = w.new_zeros(w.shape[0], model.embed[0].in_features)
     new[:, old_columns(a.features, b.features)] = w
     state["embed.0.weight"] = new
-    model.load_state_dict(state)
+    model.load_state_dict(grown_reconstruction(state, model.state_dict(), init_name))
+
+
+# a new scale's share of the mix when a reconstruction starts from one with fewer scales: softmax logit below the
+# learned ones (about 1-2% of the mix), so the model starts where the init was and training decides what the new
+# scale is worth
+NEW_SCALE_LOGIT = -4.0
+
+
+def grown_reconstruction(state: dict, own: dict, init_name: str) -> dict:
+    """`state` (an init's weights) completed for a model whose reconstruction modules may have more scales
+    (ReconConfig.scales) than the init's: the init's scales copied, the new scales' modules as freshly made
+    (`own`), the scale mixer's new rows zero with bias NEW_SCALE_LOGIT. Any other difference is an error."""
+    out = {}
+    for k, v in own.items():
+        if k not in state:
+            if not k.startswith("recon.") or ".mixer." in k:
+                raise RanadError(f"--init model lacks {k}", init_name)
+            out[k] = v
+        elif state[k].shape != v.shape:
+            old = state[k]
+            if ".mixer." not in k or old.shape[1:] != v.shape[1:] or old.shape[0] > v.shape[0]:
+                raise RanadError(f"--init model's {k} has shape {tuple(old.shape)}, not {tuple(v.shape)}", init_name)
+            grown = torch.full_like(v, NEW_SCALE_LOGIT) if k.endswith("bias") else torch.zeros_like(v)
+            grown[:old.shape[0]] = old
+            out[k] = grown
+        else:
+            out[k] = state[k]
+    extra = sorted(set(state) - set(own))
+    if extra:
+        raise RanadError(f"--init model has weights this config lacks ({extra[0]}, ...)", init_name)
+    return out
 
 
 def pair_loss(net, pair, rng: np.random.Generator, cfg: TrainConfig, cross: bool):
