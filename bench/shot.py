@@ -7,7 +7,7 @@ frames points the wrong way, which changes what the temporal step finds but not 
 separate `ranad denoise` process over the whole shot (model load, reads, denoise, writes); the ratio is of the
 whole runs, so the per-shot overheads count too.
 
-Usage: python bench/shot.py [--size 960x540] [--threads 2] [--single cpu-small-pd-v1] [--cross cpu-small-pd-xg-v1]
+Usage: python bench/shot.py [--size 960x540] [--threads 2] [--single cpu-small-pd-v2] [--cross cpu-small-pd-xg-v2]
            [--cross ANOTHER ...] [--args "--profile"]
 """
 
@@ -40,12 +40,12 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--size", default="960x540")
     ap.add_argument("--threads", type=int, default=2)
-    ap.add_argument("--single", default="cpu-small-pd-v1")
+    ap.add_argument("--single", default="cpu-small-pd-v2")
     ap.add_argument("--cross", action="append", default=[])
     ap.add_argument("--args", default="", help="options added to every ranad denoise run (e.g. --profile)")
     a = ap.parse_args()
     width, height = (int(v) for v in a.size.lower().split("x"))
-    crosses = a.cross or ["cpu-small-pd-xg-v1"]
+    crosses = a.cross or ["cpu-small-pd-xg-v2"]
     with tempfile.TemporaryDirectory() as folder:
         t = time.perf_counter()
         pattern = make_shot(folder, width, height)

@@ -21,7 +21,7 @@ from ranad_core.denoise import denoise_window, is_cross_frame
 from ranad_core.device import resolve
 from ranad_core.errors import RanadError
 from ranad_core.exr import read_deep
-from ranad_core.model.store import load_model
+from ranad_core.model.store import DEFAULT_CROSS_MODEL, DEFAULT_MODEL, load_model
 
 SHOT = Path(__file__).resolve().parents[1] / "examples" / "synth_shot"
 HAS_GPU = torch.cuda.is_available()
@@ -66,7 +66,7 @@ def _run(model_name: str, device: str, frames: list, tile: int = 32):
 
 
 @gpu
-@pytest.mark.parametrize("model_name", ["cpu-small-v1", "cpu-small-pd-v1", "cpu-small-pd-xg-v1"])
+@pytest.mark.parametrize("model_name", ["cpu-small-v1", DEFAULT_MODEL, DEFAULT_CROSS_MODEL])
 def test_shipped_models_on_the_gpu_equal_the_cpu(model_name):
     frames = [read_deep(SHOT / f"noisy_spp16.{i:04d}.exr") for i in range(3)]
     (cpu, cpu_aovs), (dev, dev_aovs) = _run(model_name, "cpu", frames), _run(model_name, "cuda", frames)
