@@ -9,6 +9,7 @@ import os
 import click
 from tqdm import tqdm
 
+from .params import device_option
 from ranad_core.errors import RanadError
 
 
@@ -21,9 +22,7 @@ from ranad_core.errors import RanadError
 @click.option("--input", "aov_input", default=None, metavar="FILE_OR_PATTERN",
               help="Files holding the AOVs, with the beauty's bin layout (default: the denoised beauty inputs "
                    "recorded in the cache, where light groups usually live).")
-@click.option("--device", type=click.Choice(["auto", "cpu", "cuda"]), default="auto", show_default=True,
-              help="Where the reconstruction runs (as for ranad denoise: auto takes the GPU when torch sees one "
-                   "and the CUDA RaNA kernels build).")
+@device_option("the reconstruction runs")
 def aov_cmd(cache, pattern, output, aov_input, device):
     """Denoise the AOV layers matching PATTERN for every frame cached in CACHE (a folder of .ranadcache files or
     one file), rerunning only the reconstruction with the cached embeddings: all AOV channels share each RaNA

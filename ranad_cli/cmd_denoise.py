@@ -10,6 +10,7 @@ import sys
 import click
 from tqdm import tqdm
 
+from .params import device_option
 from ranad_core.errors import RanadError
 
 
@@ -33,10 +34,8 @@ def parse_bytes(text: str) -> float:
 @click.option("--model", default=None, help="Shipped model name, .safetensors file or training run folder "
                                             "(default: the shipped cross-frame model for sequences, the "
                                             "single-frame one otherwise).")
-@click.option("--device", type=click.Choice(["auto", "cpu", "cuda"]), default="auto", show_default=True,
-              help="Where the model and the flat prior's OIDN run (auto: the GPU when torch sees one and the CUDA "
-                   "RaNA kernels build for it, else the CPU; cuda: the GPU or an error saying what is missing). "
-                   "Reading, input preparation and writing stay on the CPU.")
+@device_option("the model and the flat prior's OIDN run",
+               " Reading, input preparation and writing stay on the CPU.")
 @click.option("--threads", type=click.IntRange(1), default=None, help="CPU threads (default: all cores).")
 @click.option("--kind", type=click.Choice(["auto", "deepz", "deepoid"]), default="auto", show_default=True,
               help="What every frame must be: deepz, or deepoid (an id channel gives every bin of a pixel its own "

@@ -14,3 +14,10 @@ def int_list(text: str) -> tuple:
     if not vals or min(vals) < 1:
         raise click.BadParameter("sample counts must be positive")
     return vals
+
+
+def device_option(what: str, note: str = ""):
+    """The `--device auto|cpu|cuda` option of the commands that run the model (ranad_core.device.resolve)."""
+    return click.option("--device", type=click.Choice(["auto", "cpu", "cuda"]), default="auto", show_default=True,
+                        help=f"Where {what} (auto: the GPU when torch sees one and the CUDA RaNA kernels build for "
+                             f"it, else the CPU; cuda: the GPU or an error saying what is missing).{note}")
