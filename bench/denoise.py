@@ -90,13 +90,11 @@ def make_1080p(folder: str, source: str | None = None) -> str:
 DENOISE = "from ranad_cli.main import main; sys.argv = ['ranad', 'denoise', *sys.argv[2:]]; main()"
 IO_ONLY = ("from ranad_core.exr import read_deep, write_deep; img = read_deep(sys.argv[2]); "
            "write_deep(sys.argv[3], img)")
-OIDN = ("import numpy as np, pyoidn; from ranad_core.exr import read_deep; from ranad_core import metrics; "
-        "img = read_deep(sys.argv[2]); flat = np.ascontiguousarray(metrics.flat_rgb(img), np.float32); "
-        "pyoidn.denoise(np.maximum(flat, 0), hdr=True)")
+FLAT = ("import numpy as np, pyoidn; from ranad_core.exr import read_deep; from ranad_core import metrics; "
+        "img = read_deep(sys.argv[2]); flat = np.ascontiguousarray(metrics.flat_rgb(img), np.float32); ")
+OIDN = FLAT + "pyoidn.denoise(np.maximum(flat, 0), hdr=True)"
 # flat OIDN on the GPU (pyoidn's CUDA device takes torch CUDA tensors), the upload and download included
-OIDN_CUDA = ("import numpy as np, pyoidn, torch; from ranad_core.exr import read_deep; from ranad_core import metrics; "
-             "img = read_deep(sys.argv[2]); flat = np.ascontiguousarray(metrics.flat_rgb(img), np.float32); "
-             "pyoidn.denoise(torch.from_numpy(np.maximum(flat, 0)).cuda(), hdr=True).cpu()")
+OIDN_CUDA = FLAT + "import torch; pyoidn.denoise(torch.from_numpy(np.maximum(flat, 0)).cuda(), hdr=True).cpu()"
 
 
 def bench(path: str, label: str, folder: str, threads: int, model: str | None, variants=(), device="cpu") -> None:

@@ -23,7 +23,8 @@ wait $cuda_pid; cuda_rc=$?; wait $cpu_pid; cpu_rc=$?
 echo "builds: CUDA rc $cuda_rc, CPU rc $cpu_rc, $(( $(date +%s) - t0 )) s"
 grep -i "error\|spill" "$LOG/build_cuda.log" | head -20
 [ $cuda_rc -eq 0 ] || { tail -30 "$LOG/build_cuda.log"; exit 1; }
-python3 -m pytest -q -rs -p no:cacheprovider tests/test_rana_cuda.py tests/test_gpu.py 2>&1 | tee "$LOG/tests.log" | tail -25
+python3 -m pytest -q -rs -p no:cacheprovider tests/test_rana_cuda.py tests/test_gpu.py 2>&1 | tee "$LOG/tests.log" \
+  | tail -25
 python3 bench/rana.py --threads "$THREADS" --repeats 5 2>&1 | tee "$LOG/bench_rana.log"
 if [ -n "$FRAME" ]; then
   python3 bench/denoise.py --device cuda --threads "$THREADS" --real '' --frame "$FRAME" --args=--profile 2>&1 \

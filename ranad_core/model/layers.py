@@ -52,7 +52,8 @@ def bin_dropout(layout: Layout, pattern: int) -> tuple[torch.Tensor, Layout]:
     offs = layout.offsets
     counts = offs[1:] - offs[:-1]
     pix = layout.pixels[:, 0] * layout.width + layout.pixels[:, 1]
-    within = torch.arange(layout.bins, device=offs.device) - torch.repeat_interleave(offs[:-1], counts, output_size=layout.bins)
+    first = torch.repeat_interleave(offs[:-1], counts, output_size=layout.bins)
+    within = torch.arange(layout.bins, device=offs.device) - first
     keep = (within + layout.pixels[:, 0] + layout.pixels[:, 1] + pattern) % 2 == 0
     kept = torch.nonzero(keep, as_tuple=False).flatten()
     coarse = torch.bincount(pix[kept], minlength=counts.numel())
