@@ -330,21 +330,53 @@ def test_separation_loss_sees_colour_moved_between_depth_layers():
     other leaves the flattened colour as it was (the composite loss sees nothing) but puts it on the wrong side of
     a holdout, which the separation term measures. Written out here: the front composite is the front bin's
     colour, the back composite the back bin's, each against the reference's."""
-    from ranad_core.train.losses import composite, separation, smape, total_loss
+    from ranad_core.train.losses import composite, depth_slices, separation, smape, total_loss
 
     offsets = torch.tensor([0, 2])
     ref = {"diffuse": torch.tensor([[0.0, 0.0, 0.0], [0.6, 0.4, 0.2]]), "specular": torch.zeros(2, 3),
            "alpha": torch.tensor([[0.0], [1.0]]), "depth": torch.tensor([[1.0], [3.0]])}
     moved = {**ref, "diffuse": ref["diffuse"].flip(0)}
     assert torch.allclose(composite(moved, offsets), composite(ref, offsets))
-    assert separation(ref, ref, offsets).item() == 0
+    assert separation(depth_slices(ref, ref, offsets)).item() == 0
     zero, colour = torch.zeros(1, 3), ref["diffuse"][1:]
     expected = (smape(colour, zero) + smape(zero, colour)) / 2
-    assert separation(moved, ref, offsets).item() == pytest.approx(expected.item(), rel=1e-6) and expected > 0.5
+    assert separation(depth_slices(moved, ref, offsets)).item() == pytest.approx(expected.item(), rel=1e-6) and expected > 0.5
     _, off = total_loss(moved, ref, offsets, (1, 1))
     _, on = total_loss(moved, ref, offsets, (1, 1), weights={"separation": 1.0})
     assert "separation" not in off and on["separation"] == pytest.approx(expected.item(), rel=1e-6)
     assert on["composite"] == off["composite"] == pytest.approx(0, abs=1e-7)
+
+
+def test_separation_ssim_sees_structure_moved_between_depth_layers():
+    """8x8 pixels, each a transparent front bin (alpha 0) over an opaque back bin; the reference's front layer holds
+    a checker. Moving the front colour into the back bin on the checker's dark squares leaves every composite
+    colour as it was (composite terms zero) but changes both layers' structure: the separation_ssim term is
+    positive, zero for the reference itself, and computed only when weighted."""
+    from ranad_core.train.losses import total_loss
+
+    h = w = 8
+    offsets = torch.arange(0, 2 * h * w + 1, 2)
+    checker = ((torch.arange(h)[:, None] + torch.arange(w)[None, :]) % 2).reshape(-1).float()
+    diffuse = torch.zeros(2 * h * w, 3)
+    diffuse[0::2] = 0.5 + 0.4 * checker[:, None]        # front: a checker
+    diffuse[1::2] = 0.3                                 # back: flat
+    ref = {"diffuse": diffuse, "specular": torch.zeros_like(diffuse),
+           "alpha": torch.tensor([0.0, 1.0]).repeat(h * w)[:, None],
+           "depth": torch.tensor([1.0, 3.0]).repeat(h * w)[:, None]}
+    moved_diffuse = diffuse.clone()
+    dark = checker == 0
+    front, back = moved_diffuse[0::2], moved_diffuse[1::2]
+    back[dark] += front[dark]
+    front[dark] = 0
+    moved_diffuse[0::2], moved_diffuse[1::2] = front, back
+    moved = {**ref, "diffuse": moved_diffuse}
+    weights = {"separation_ssim": 1.0}
+    _, same = total_loss(ref, ref, offsets, (h, w), weights=weights)
+    _, off = total_loss(moved, ref, offsets, (h, w))
+    _, on = total_loss(moved, ref, offsets, (h, w), weights=weights)
+    assert same["separation_ssim"] == pytest.approx(0, abs=1e-5)
+    assert "separation_ssim" not in off and on["separation_ssim"] > 0.05
+    assert on["composite"] == pytest.approx(0, abs=1e-6) and on["composite_ssim"] == pytest.approx(0, abs=1e-5)
 
 
 def test_loss_weights_from_the_command_line(tmp_path):

@@ -1,8 +1,9 @@
 """Losses (paper Sec. 5): SMAPE on the bins of each radiance layer; on the composited (flattened) colour, SMAPE
 plus an SSIM term on the tone-mapped image (structure the per-pixel terms miss: blotches, lost edges); L1 on
-alpha and relative L1 on depth; optionally (weight 0 by default) a depth-separation term: SMAPE of the
-composites of the bins in front of and behind the crop's median reference depth, each flattened alone, which is
-what a compositor's holdout or insertion sees (colour moved between depth layers, wrong alpha). For cross-frame
+alpha and relative L1 on depth; optionally (weight 0 by default) depth-separation terms: SMAPE (`separation`) and
+the SSIM term (`separation_ssim`) of the composites of the bins in front of and behind the crop's median reference
+depth, each flattened alone, which is what a compositor's holdout or insertion sees (colour moved between depth
+layers, wrong alpha; blotches within one layer that the full composite hides). For cross-frame
 training on consecutive frames, a temporal term: L1 between the change of the tone-mapped composite from one frame
 to the next and the reference's change (the flicker that `ranad eval --temporal` measures)."""
 
@@ -26,13 +27,18 @@ def composite(layers: dict, offsets: torch.Tensor) -> torch.Tensor:
     return flatten_torch(values, offsets, 3)[:, :3]
 
 
-def separation(pred: dict, ref: dict, offsets: torch.Tensor) -> torch.Tensor:
-    """Mean SMAPE of the front and back composites (bins with reference depth below / from the median reference
-    depth of the crop, each flattened alone; the split follows the reference so both sides hold the same bins)."""
+def depth_slices(pred: dict, ref: dict, offsets: torch.Tensor) -> list:
+    """[(pred, ref)] composites [P, 3] of the bins in front of and behind the crop's median reference depth, each
+    flattened alone (the split follows the reference so both sides hold the same bins): what a compositor's
+    holdout or insertion sees."""
     z = ref["depth"][:, 0]
     front = (z < torch.quantile(z, 0.5)).to(z.dtype)[:, None]   # the median as metrics.split_depth takes it
-    return sum(smape(composite(_masked(pred, m), offsets), composite(_masked(ref, m), offsets))
-               for m in (front, 1 - front)) / 2
+    return [(composite(_masked(pred, m), offsets), composite(_masked(ref, m), offsets)) for m in (front, 1 - front)]
+
+
+def separation(slices: list) -> torch.Tensor:
+    """Mean SMAPE of the front and back composites (depth_slices)."""
+    return sum(smape(p, r) for p, r in slices) / len(slices)
 
 
 def _masked(layers: dict, mask: torch.Tensor) -> dict:
@@ -50,12 +56,17 @@ def total_loss(pred: dict, ref: dict, offsets: torch.Tensor, size: tuple[int, in
     parts = {"diffuse": smape(pred["diffuse"], ref["diffuse"]), "specular": smape(pred["specular"], ref["specular"]),
              "alpha": (pred["alpha"] - ref["alpha"]).abs().mean(),
              "depth": ((pred["depth"] - ref["depth"]).abs() / (ref["depth"].abs() + 1e-3)).mean()}
-    if weights["separation"] > 0:
-        parts["separation"] = separation(pred, ref, offsets)
+    img = lambda x: tonemap(x / scale).T.reshape(3, h, w)  # noqa: E731
+    structure = h >= 4 and w >= 4                             # SSIM needs its window
+    if weights["separation"] > 0 or (weights["separation_ssim"] > 0 and structure):
+        slices = depth_slices(pred, ref, offsets)
+        if weights["separation"] > 0:
+            parts["separation"] = separation(slices)
+        if weights["separation_ssim"] > 0 and structure:
+            parts["separation_ssim"] = sum(1 - ssim(img(p), img(r)) for p, r in slices) / len(slices)
     cp, cr = composite(pred, offsets), composite(ref, offsets)
     parts["composite"] = smape(cp, cr)
-    if h >= 4 and w >= 4:
-        img = lambda x: tonemap(x / scale).T.reshape(3, h, w)  # noqa: E731
+    if structure:
         parts["composite_ssim"] = 1 - ssim(img(cp), img(cr))
     loss = sum(weights[k] * v for k, v in parts.items())
     return loss, {k: v.item() for k, v in parts.items()}
