@@ -7,6 +7,8 @@ from tqdm import tqdm
 
 from ranad_core.train.weights import WEIGHTS
 
+from .params import device_option
+
 
 def _loss_weight(text: str) -> tuple[str, float]:
     """'TERM=W' -> (TERM, W), or a usage error naming the known terms."""
@@ -62,12 +64,16 @@ def _loss_weight(text: str) -> tuple[str, float]:
 @click.option("--loss-weight", "loss_weights", multiple=True, metavar="TERM=W",
               help="Override a loss term's weight (repeatable). Terms and defaults: " + ", ".join(
                   f"{k}={v:g}" for k, v in WEIGHTS.items()) + ". 'separation' compares the composites of the bins in "
-                  "front of and behind the crop's median depth, each alone (what a holdout sees).")
+                  "front of and behind the crop's median depth, each alone (what a holdout sees); 'separation_ssim' "
+                  "adds the SSIM term on those two composites.")
+@device_option("the model trains", " Crops are made on the CPU either way; data-parallel --processes run on the "
+               "CPU.")
 def train_cmd(datasets, run, config, steps, crop, lr, seed, checkpoint_every, processes, p_no_aux, p_no_split, window,
-              init, temporal_weight, until, freeze_spatial, p_misalign, loss_weights):
+              init, temporal_weight, until, freeze_spatial, p_misalign, loss_weights, device):
     """Train on DATASETS (one or several outputs of `ranad synth`, their scenes pooled): centre-frame pairs,
     random crops, flips and transposes, SMAPE on the diffuse and specular bins and on the composited colour plus
     SSIM on it, L1 on alpha and depth. Resumes from RUN/checkpoint.pt when it exists."""
+    from ranad_core.device import resolve
     from ranad_core.model import get_config
     from ranad_core.train.trainer import TrainConfig, resume_step, spawn_local, train
 
@@ -76,12 +82,16 @@ def train_cmd(datasets, run, config, steps, crop, lr, seed, checkpoint_every, pr
     except ValueError as e:
         raise click.BadParameter(str(e), param_hint="--config") from None
     weights = tuple(_loss_weight(text) for text in loss_weights)
+    if processes > 1 and device == "cuda":
+        raise click.BadParameter("data-parallel --processes run on the CPU; train on a GPU with one process",
+                                 param_hint="--device")
+    run_on = "cpu" if processes > 1 else resolve(device).type
     cfg = TrainConfig(dataset=datasets[0] if len(datasets) == 1 else tuple(datasets), run=run, config=config,
                       steps=steps, crop=crop, lr=lr, seed=seed,
                       checkpoint_every=checkpoint_every, p_no_aux=p_no_aux, p_no_split=p_no_split,
                       window=window, init=init, temporal_weight=temporal_weight, until=until,
                       freeze_spatial=freeze_spatial, p_misalign=p_misalign,
-                      loss_weights=weights)
+                      loss_weights=weights, device=run_on)
     if processes > 1:
         spawn_local(cfg, processes)
         click.echo(f"done: {steps} steps x {processes} processes, log in {run}/train.log")

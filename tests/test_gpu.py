@@ -1,5 +1,6 @@
-"""The GPU path of `ranad denoise --device`: device choice everywhere, and on a machine with a CUDA GPU the model,
-tiles, AOV reuse and the flat prior's OIDN on the GPU against the same run on the CPU.
+"""The GPU path of `ranad denoise --device` and `ranad train --device`: device choice everywhere, and on a machine
+with a CUDA GPU the model, tiles, AOV reuse, the flat prior's OIDN and a training loss on the GPU against the same
+run on the CPU.
 
 The GPU cases skip without a CUDA GPU (CI has none); their code is still imported and the device choice is
 tested on every machine. The CUDA kernels themselves are checked against the reference in test_rana_cuda.py.
@@ -21,7 +22,8 @@ from ranad_core.denoise import denoise_window, is_cross_frame
 from ranad_core.device import resolve
 from ranad_core.errors import RanadError
 from ranad_core.exr import read_deep
-from ranad_core.model.store import DEFAULT_CROSS_MODEL, DEFAULT_MODEL, load_model
+from ranad_core.model.store import DEFAULT_CROSS_MODEL, DEFAULT_MODEL, load_checkpoint, load_model
+from test_train import dataset_from_example
 
 SHOT = Path(__file__).resolve().parents[1] / "examples" / "synth_shot"
 HAS_GPU = torch.cuda.is_available()
@@ -45,6 +47,19 @@ def test_without_a_gpu_cuda_is_refused_and_auto_runs_on_the_cpu(tmp_path):
     r = CliRunner().invoke(cli, ["aov", str(tmp_path), "--layers", "lg_*", "-o", str(tmp_path / "aov/"),
                                  "--device", "cuda"])
     assert r.exit_code == 2 and "--device: no CUDA GPU is visible" in r.output, r.output
+
+
+@pytest.mark.skipif(HAS_GPU, reason="checks the refusal on a machine without a GPU")
+def test_without_a_gpu_training_on_cuda_is_refused(tmp_path):
+    """`ranad train --device cuda` on a CPU machine: one line, exit 2, no run folder; data-parallel processes on a
+    GPU are refused on any machine."""
+    ds = dataset_from_example(tmp_path / "ds")
+    for extra, msg in ((["--device", "cuda"], "--device: no CUDA GPU is visible"),
+                       (["--device", "cuda", "--processes", "2"], "data-parallel --processes run on the CPU")):
+        run = tmp_path / "run"
+        r = CliRunner().invoke(cli, ["train", str(ds), "-o", str(run), "--steps", "1", "--crop", "16", *extra])
+        assert r.exit_code == 2 and msg in r.output, r.output
+        assert not run.exists()
 
 
 def _close(a: np.ndarray, b: np.ndarray, what: str) -> None:
@@ -99,3 +114,38 @@ def test_cli_device_cuda(tmp_path):
     assert "device: cuda" in r.output
     before, after = (float(x) for x in r.output.split("SMAPE vs reference ")[1].split(" (")[0].split(" -> "))
     assert after < before
+
+
+@gpu
+def test_training_loss_on_the_gpu_equals_the_cpu(tmp_path):
+    """One training crop's loss (the model in eval mode, so bin dropout draws nothing) on the GPU and on the CPU,
+    from the same random stream: equal to float32 summation order."""
+    from ranad_core.train.trainer import TrainConfig, pair_loss
+    from ranad_core.train.data import find_pairs
+
+    ds = dataset_from_example(tmp_path / "ds")
+    cfg = TrainConfig(dataset=str(ds), run=str(tmp_path / "run"), config="cpu-small-pd", crop=32)
+    pair = find_pairs(cfg.dataset)[0]
+    model = load_model(DEFAULT_MODEL).model.eval()
+    cpu_loss, cpu_parts = pair_loss(model, pair, np.random.default_rng(3), cfg, False)
+    gpu_loss, gpu_parts = pair_loss(model.to("cuda"), pair, np.random.default_rng(3), cfg, False)
+    assert gpu_loss.device.type == "cuda"
+    assert gpu_loss.item() == pytest.approx(cpu_loss.item(), rel=2e-3)
+    for k in cpu_parts:
+        assert gpu_parts[k] == pytest.approx(cpu_parts[k], rel=5e-3, abs=1e-5), k
+
+
+@gpu
+def test_cli_train_on_the_gpu_resumes_on_the_cpu(tmp_path):
+    """`ranad train --device cuda` trains and checkpoints; the checkpoint resumes on the CPU."""
+    ds = dataset_from_example(tmp_path / "ds")
+    run = tmp_path / "run"
+    base = ["train", str(ds), "-o", str(run), "--crop", "16", "--config", "cpu-small-pd", "--checkpoint-every", "1"]
+    r = CliRunner().invoke(cli, [*base, "--steps", "4", "--until", "2", "--device", "cuda"])
+    assert r.exit_code == 0, r.output
+    state = load_checkpoint(run / "checkpoint.pt")
+    assert state["step"] == 2 and state["train_config"]["device"] == "cuda"
+    assert all(torch.isfinite(v).all() for v in state["model"].values())
+    r = CliRunner().invoke(cli, [*base, "--steps", "4", "--device", "cpu"])
+    assert r.exit_code == 0, r.output
+    assert load_checkpoint(run / "checkpoint.pt")["step"] == 4

@@ -50,6 +50,7 @@ class TrainConfig:
     freeze_spatial: bool = False  # cross-frame configs: train only the temporal parts; the single-frame model stays
     p_misalign: float = 0.0       # cross-frame configs: share of windows with misaligned neighbours (data.cropped)
     loss_weights: tuple = ()      # (term, weight) pairs overriding weights.WEIGHTS, e.g. (("separation", 1.0),)
+    device: str = "cpu"           # where the model trains ("cpu" or "cuda"; crops are made on the CPU and moved)
 
 
 def learning_rate(cfg: TrainConfig, step: int) -> float:
@@ -158,6 +159,11 @@ def build_model(cfg: TrainConfig, config):
     return CrossFrameRaNAD(config, feature_dim(config.features))
 
 
+def model_device(net) -> torch.device:
+    """The device the model's weights are on (training crops are moved there)."""
+    return next(unwrap(net).parameters()).device
+
+
 def unwrap(net):
     """The model inside a DistributedDataParallel wrapper (or the model itself)."""
     return getattr(net, "module", net)
@@ -217,18 +223,19 @@ def grown_reconstruction(state: dict, own: dict, init_name: str) -> dict:
 def pair_loss(net, pair, rng: np.random.Generator, cfg: TrainConfig, cross: bool):
     """(loss, parts) of one training crop of `pair` (its frame's window for cross-frame models); None for a crop
     without bins."""
-    features = unwrap(net).config.features
+    features, device = unwrap(net).config.features, model_device(net)
     if cross:
         frames, ref_img, centre, ctxs = sample_window(pair, rng, cfg.crop, cfg.window, features, cfg.p_misalign)
         frames, ref_img = reduce_window(frames, ref_img, rng, cfg.p_no_aux, cfg.p_no_split)
-        window = [prepare(f, c.z_stats, features, c.scale) for f, c in zip(frames, ctxs)]
-        noisy, ref = window[centre], prepare(ref_img)
+        window = [prepare(f, c.z_stats, features, c.scale).to(device) for f, c in zip(frames, ctxs)]
+        noisy, ref = window[centre], prepare(ref_img).to(device)
         scale = ctxs[centre].scale
     else:
         ctx = frame_context(pair.noisy, features)
         noisy_img, ref_img = reduce_inputs(*sample(pair, rng, cfg.crop, features), rng, cfg.p_no_aux,
                                            cfg.p_no_split)
-        noisy, ref = prepare(noisy_img, ctx.z_stats, features, ctx.scale), prepare(ref_img)
+        noisy = prepare(noisy_img, ctx.z_stats, features, ctx.scale).to(device)
+        ref = prepare(ref_img).to(device)
         if noisy.layout.bins == 0:
             return None
         return total_loss(net(noisy), ref.layers, noisy.layout.offsets, noisy.layout.size, ctx.scale,
@@ -244,13 +251,13 @@ def consecutive_loss(net, pairs: tuple, rng: np.random.Generator, cfg: TrainConf
     the mean of their losses plus temporal_weight x the temporal loss; None when a crop has no bins."""
     no_aux, no_split = rng.random() < cfg.p_no_aux, rng.random() < cfg.p_no_split  # the same for both frames
     inputs = []
-    features = unwrap(net).config.features
+    features, device = unwrap(net).config.features, model_device(net)
     for frames, ref_img, centre, ctxs in sample_consecutive(pairs, rng, cfg.crop, cfg.window, features):
         frames, ref_img = reduce_window(frames, ref_img, rng, float(no_aux), float(no_split))
-        window = [prepare(f, c.z_stats, features, c.scale) for f, c in zip(frames, ctxs)]
+        window = [prepare(f, c.z_stats, features, c.scale).to(device) for f, c in zip(frames, ctxs)]
         if window[centre].layout.bins == 0:
             return None
-        inputs.append((window, centre, prepare(ref_img), ctxs[centre].scale))
+        inputs.append((window, centre, prepare(ref_img).to(device), ctxs[centre].scale))
     preds, losses, parts = [], [], {}
     for window, centre, ref, scale in inputs:
         preds.append(net(window, centre))
@@ -294,7 +301,9 @@ def train(cfg: TrainConfig, progress=None) -> dict:
     check_freeze(cfg, config)
     os.makedirs(cfg.run, exist_ok=True)
     torch.manual_seed(cfg.seed)
-    model = build_model(cfg, config)
+    if world > 1 and cfg.device != "cpu":  # gloo averages CPU gradients; GPU data parallelism is not wired up
+        raise RanadError("data-parallel training runs on the CPU only (one process on a GPU)", "--device")
+    model = build_model(cfg, config).to(cfg.device)
     freeze_spatial(model, cfg)
     opt = torch.optim.AdamW(param_groups(model), lr=cfg.lr, weight_decay=cfg.weight_decay)
     rng = np.random.default_rng(cfg.seed if world == 1 else [cfg.seed, rank])
