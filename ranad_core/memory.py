@@ -6,6 +6,10 @@ frame and its neighbours, the output: `frame_working_bytes`), plus the idle buff
 (bounded by RANAD_RANA_BUFFER_CACHE_MB, which `cap_kernel_cache` sizes to the ceiling), plus the tiles' working
 memory (denoise.BYTES_PER_BIN per bin of the largest haloed window). The tiles get what is left; when that is too
 little for one minimal tile the frame cannot be denoised within the ceiling, and the error says how much it needs.
+
+On a GPU (`--device cuda`) the tiles' working memory sits in the GPU's memory, which `--max-memory` does not
+describe: the tiles are then also sized to what the GPU has free when the frame starts (`device_free_bytes`, less
+the same margin), so a smaller card gets smaller tiles rather than an out-of-memory error mid-frame.
 """
 
 from __future__ import annotations
@@ -59,13 +63,35 @@ def frame_working_bytes(images: list, centre: int) -> float:
 
 
 def fmt(n: float) -> str:
-    return f"{n / 2**30:.2f} GB" if n >= 2**30 else f"{n / 2**20:.0f} MB"
+    if n >= 2**30:
+        return f"{n / 2**30:.2f} GB"
+    return f"{n / 2**20:.0f} MB" if n >= 10 * 2**20 else f"{n / 2**20:.1f} MB"
 
 
 def tile_budget(max_memory: float, images: list, centre: int) -> tuple[float, float]:
     """(bytes the tiles may use, bytes everything else takes) under the ceiling `max_memory` for this frame."""
     other = resident_bytes() + frame_working_bytes(images, centre) + kernel_cache_bytes() + MARGIN * max_memory
     return max_memory - other, other
+
+
+def device_free_bytes(device) -> float:
+    """Bytes the tiles may use on `device`: for a CUDA device, what the driver reports free plus what torch's
+    allocator holds unused (it reuses that first), less MARGIN of the card's total; unbounded for the CPU (the
+    ceiling `--max-memory` covers it)."""
+    import torch
+
+    device = torch.device(device)
+    if device.type != "cuda":
+        return float("inf")
+    free, total = torch.cuda.mem_get_info(device)
+    cached = torch.cuda.memory_reserved(device) - torch.cuda.memory_allocated(device)
+    return float(free + cached - MARGIN * total)
+
+
+def too_small_on_device(free: float, minimal_tile: float, tile: int, halo: int, where: str) -> RanadError:
+    """The error for a GPU whose free memory does not fit one minimal tile."""
+    return RanadError(f"the GPU has {fmt(max(free, 0))} free for the tiles, and one {tile}-pixel tile with its "
+                      f"{halo}-pixel halo needs {fmt(minimal_tile)}: free GPU memory or run with --device cpu", where)
 
 
 def too_small(max_memory: float, other: float, minimal_tile: float, tile: int, halo: int, where: str) -> RanadError:

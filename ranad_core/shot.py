@@ -171,18 +171,22 @@ def first_frame(path: str, opts: "ShotOptions"):
     return img, mapping, found, labels
 
 
-def choose_frame_tile(images, centre, halo: int, max_memory: float, where: str) -> int:
-    """The largest tile that keeps this frame's denoising under the ceiling `max_memory` (memory.py); a RanadError
-    when even the smallest tile does not fit."""
+def choose_frame_tile(images, centre, halo: int, max_memory: float, where: str,
+                      device_free: float = float("inf")) -> int:
+    """The largest tile that keeps this frame's denoising under the ceiling `max_memory` (memory.py) and, for a
+    model on a GPU, inside `device_free` bytes of GPU memory (memory.device_free_bytes); a RanadError when even
+    the smallest tile does not fit."""
     from . import memory
 
     img = images[centre]
     budget, other = memory.tile_budget(max_memory, images, centre)
-    tile = choose_tile(img.offsets, img.width, img.height, halo, budget, len(images))
+    tile = choose_tile(img.offsets, img.width, img.height, halo, min(budget, device_free), len(images))
     if tile == ALIGN:
         need = tile_bytes(img.offsets, img.width, img.height, ALIGN, halo, len(images))
         if need > budget:
             raise memory.too_small(max_memory, other, need, ALIGN, halo, where)
+        if need > device_free:
+            raise memory.too_small_on_device(device_free, need, ALIGN, halo, where)
     return tile
 
 
@@ -405,7 +409,13 @@ def _denoise_part(model, images, centre, flows, where, opts, summary, halo, tile
             summary.messages.append(msg)
             if warn:
                 warn(msg)
-    tile = opts.tile or choose_frame_tile(images, centre, halo, opts.max_memory, where)
+    if opts.tile:
+        tile = opts.tile
+    else:
+        from .memory import device_free_bytes
+
+        tile = choose_frame_tile(images, centre, halo, opts.max_memory, where,
+                                 device_free_bytes(next(model.parameters()).device))
     ntiles = sum(1 for _ in range(0, img.height, tile)) * sum(1 for _ in range(0, img.width, tile))
     if tile_bar is not None and hasattr(tile_bar, "reset"):
         tile_bar.reset(ntiles)

@@ -16,6 +16,7 @@ from click.testing import CliRunner
 
 from ranad_cli.main import cli
 from ranad_core import cache as cache_io
+from ranad_core import denoise as denoise_mod
 from ranad_core import shot as shot_mod
 from ranad_core.exr import read_deep, write_deep
 from test_denoise import tiny_model
@@ -149,6 +150,37 @@ def test_max_memory_is_the_tile_budget(tmp_path, model_file, monkeypatch):
     r = run("denoise", FRAME, "-o", tmp_path / "enough.exr", "--model", model_file, "--max-memory",
             f"{int(need / 2**20) + 64}M")   # the size the error names is enough (a little for RSS jitter)
     assert r.exit_code == 0, r.output
+
+
+def test_gpu_free_memory_bounds_the_tiles(tmp_path, model_file, monkeypatch):
+    """A model on a GPU gets tiles sized to the GPU's free memory as well as to --max-memory: the smaller budget
+    reaches the tile choice, and a GPU too full for one minimal tile is a one-line error with no output. The GPU's
+    free memory is stood in for here (memory.device_free_bytes reads the driver; the CPU is unbounded)."""
+    from ranad_core import memory
+
+    assert memory.device_free_bytes("cpu") == float("inf")
+    calls = []
+    real = shot_mod.choose_tile
+
+    def spy(offsets, width, height, halo, budget, frames=1):
+        calls.append((budget, real(offsets, width, height, halo, budget, frames)))
+        return calls[-1][1]
+
+    monkeypatch.setattr(shot_mod, "choose_tile", spy)
+    img = read_deep(FRAME)
+    need = denoise_mod.tile_bytes(img.offsets, img.width, img.height, denoise_mod.ALIGN, 0)
+    for free in (float("inf"), 2 * need):
+        monkeypatch.setattr(memory, "device_free_bytes", lambda device, free=free: free)
+        r = run("denoise", FRAME, "-o", tmp_path / "m.exr", "--model", model_file, "--halo", "0")
+        assert r.exit_code == 0, r.output
+    (host, host_tile), (gpu, gpu_tile) = calls
+    assert host > 2 * need and gpu == 2 * need and gpu_tile < host_tile
+    assert denoise_mod.tile_bytes(img.offsets, img.width, img.height, gpu_tile, 0) <= 2 * need
+    monkeypatch.setattr(memory, "device_free_bytes", lambda device: need / 2)
+    r = run("denoise", FRAME, "-o", tmp_path / "full.exr", "--model", model_file, "--halo", "0")
+    assert r.exit_code == 2 and not (tmp_path / "full.exr").exists()
+    line = r.output.strip().splitlines()[-1]
+    assert "ranad: error:" in line and "the GPU has" in line and "run with --device cpu" in line, r.output
 
 
 def test_tile_and_halo(tmp_path, model_file):

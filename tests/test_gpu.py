@@ -149,3 +149,16 @@ def test_cli_train_on_the_gpu_resumes_on_the_cpu(tmp_path):
     r = CliRunner().invoke(cli, [*base, "--steps", "4", "--device", "cpu"])
     assert r.exit_code == 0, r.output
     assert load_checkpoint(run / "checkpoint.pt")["step"] == 4
+
+
+@gpu
+def test_device_free_bytes_reads_the_gpu():
+    """The GPU budget of the tiles: positive, below the card's total, and it shrinks by what torch allocates."""
+    from ranad_core.memory import device_free_bytes
+
+    total = torch.cuda.get_device_properties(0).total_memory
+    before = device_free_bytes("cuda")
+    held = torch.empty(256 * 2**20, dtype=torch.uint8, device="cuda")
+    after = device_free_bytes("cuda")
+    assert 0 < after < before < total
+    assert before - after == pytest.approx(held.numel(), rel=0.05)
