@@ -64,6 +64,29 @@ def test_tiles_equal_the_whole_frame():
     assert np.abs(cut.image.values - whole.image.values).max() > 1e-3
 
 
+def test_tiles_of_a_lattice_dropout_model_equal_the_whole_frame():
+    """A model whose U-Net has two levels and whose reconstructions three scales on the lattice bin dropout (the
+    parity of levels 2-3 depends on pixel coordinates modulo 2-4): tiles with any halo at least its receptive
+    field equal the whole frame, because windows start at multiples of ALIGN (the halo is rounded up to it), where
+    the lattices keep their phase."""
+    torch.manual_seed(0)
+    rc = ReconConfig(scales=3, heads=2, head_dim=8, radius=1.0, radius_growth=0.5)
+    cfg = ModelConfig("tiny-lattice", dim=16, unets=1, levels=2, blocks_per_level=1, heads=2, head_dim=8,
+                      radius=1.0, radius_growth=0.5, recon={"diffuse": rc, "specular": rc, "alpha": rc, "depth": rc},
+                      dropout_lattice=True)
+    model = RaNAD(cfg, feature_dim()).eval()
+    from deep_factory import random_deep
+
+    img = random_deep(80, 80, max_bins=2, seed=3)    # windows of inner tiles start inside the frame
+    whole = denoise_frame(model, img)
+    rf = receptive_field(model)
+    assert rf < 32
+    for halo in (rf, rf + 1, rf + 3):
+        tiled = denoise_frame(model, img, tile=16, halo=halo)
+        assert tiled.tiles == 25
+        np.testing.assert_allclose(tiled.image.values, whole.image.values, rtol=1e-4, atol=1e-5)   # sum order
+
+
 def test_output_keeps_layout_ids_header_and_channels(tmp_path, model_file):
     out = tmp_path / "den.exr"
     r = run("denoise", FRAME, "-o", out, "--model", model_file, "--keep-noisy", "noisy.")

@@ -29,6 +29,33 @@ def test_bin_dropout_halves_each_pixel_and_patterns_alternate():
     assert torch.equal(lay.pixels[k0], c0.pixels)
 
 
+def test_lattice_dropout_keeps_single_bin_pixels_on_ever_sparser_lattices():
+    """A frame of single-bin pixels, four down-sampling levels, both patterns at each level: with the lattice,
+    level L keeps exactly 1/2^L of the pixels, each level's bins are a subset of the level above's, and from level
+    2 on the kept pixels are a regular lattice (constant y and x modulo the spacing). The first models' dropout
+    keeps none at level 2 (what dropout_lattice mends). A multi-bin frame still halves every pixel's bins."""
+    h = w = 32
+    single = Layout.of(torch.arange(h * w + 1), h, w)
+    for patterns in ((0, 1, 0, 1), (1, 0, 1, 0), (0, 0, 1, 1)):
+        lay, ids = single, torch.arange(h * w)
+        for level, pattern in enumerate(patterns, 1):
+            kept, lay = bin_dropout(lay, pattern, level, lattice=True)
+            ids = ids[kept]
+            assert lay.bins == h * w // 2 ** level
+            y, x = ids // w, ids % w
+            if level >= 2:
+                step = 2 ** (level // 2)
+                assert len(set((y % step).tolist())) == 1 and len(set((x % step).tolist())) == 1
+    kept, first = bin_dropout(single, 0)
+    assert first.bins == h * w // 2 and bin_dropout(first, 1)[1].bins == 0
+    lay = layout()
+    counts = lay.offsets[1:] - lay.offsets[:-1]
+    for level in (1, 2, 3):
+        kept = bin_dropout(lay, 0, level, lattice=True)[1]
+        n = kept.offsets[1:] - kept.offsets[:-1]
+        assert torch.all((n == counts // 2) | (n == (counts + 1) // 2))
+
+
 def test_rana_block_shapes_and_gradients():
     lay = layout()
     torch.manual_seed(0)

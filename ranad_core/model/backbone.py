@@ -17,9 +17,9 @@ from .layers import Layout, MultiHeadRaNA, RaNABlock, bin_dropout
 
 class UNet(nn.Module):
     def __init__(self, dim: int, levels: int, blocks_per_level: int, heads: int, head_dim: int,
-                 radius: float, radius_growth: float, pattern: int, backend: str = "auto"):
+                 radius: float, radius_growth: float, pattern: int, backend: str = "auto", lattice: bool = False):
         super().__init__()
-        self.levels, self.pattern = levels, pattern
+        self.levels, self.pattern, self.lattice = levels, pattern, lattice
         radii = [radius + radius_growth * lv for lv in range(levels + 1)]
 
         def stage(r):
@@ -42,7 +42,7 @@ class UNet(nn.Module):
             for blk in self.enc[lv]:
                 feat = blk(feat, layouts[-1])
             skips.append(feat)
-            kept, coarse = bin_dropout(layouts[-1], (lv + self.pattern) % 2)
+            kept, coarse = bin_dropout(layouts[-1], (lv + self.pattern) % 2, lv + 1, self.lattice)
             norm, down = self.norms[2 * lv], self.down[lv]
             if quick:
                 sub = feat[kept]
@@ -72,10 +72,10 @@ class MultiUNet(nn.Module):
     """U-Nets in a chain; each one's output is the next one's input, dropout patterns alternate."""
 
     def __init__(self, dim: int, unets: int, levels: int, blocks_per_level: int, heads: int, head_dim: int,
-                 radius: float, radius_growth: float, backend: str = "auto"):
+                 radius: float, radius_growth: float, backend: str = "auto", lattice: bool = False):
         super().__init__()
         self.unets = nn.ModuleList(UNet(dim, levels, blocks_per_level, heads, head_dim, radius, radius_growth,
-                                        pattern=i % 2, backend=backend) for i in range(unets))
+                                        pattern=i % 2, backend=backend, lattice=lattice) for i in range(unets))
 
     def forward(self, feat: torch.Tensor, layout: Layout) -> torch.Tensor:
         for u in self.unets:

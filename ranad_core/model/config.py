@@ -43,6 +43,9 @@ class ModelConfig:
     demodulate: bool = False
     # matching temporal step: neighbours' bins take part only where their guides agree with the bin's (matching.GUARD)
     temporal_guard: bool = False
+    # bin dropout on a quincunx pyramid (layers.bin_dropout): every down-sampling level keeps half the bins, single-bin
+    # pixels included; False (the first models) empties the second level of single-bin pixels
+    dropout_lattice: bool = False
 
     def to_dict(self) -> dict:
         d = asdict(self)
@@ -119,6 +122,13 @@ CONFIGS["cpu-small-pd-xm"] = ModelConfig(**{**CONFIGS["cpu-small-pd-xk"].__dict_
 # with the bin's, rules that hold on scene families the scores never saw (issue 25)
 CONFIGS["cpu-small-pd-xg"] = ModelConfig(**{**CONFIGS["cpu-small-pd-xm"].__dict__, "name": "cpu-small-pd-xg",
                                            "temporal_guard": True})
+
+
+# cpu-small-pd whose U-Nets' second level and reconstructions' third scale keep single-bin pixels (a lattice
+# twice as sparse as the first level's, where the first dropout left none): on the single-bin pixels that make
+# most of a frame, the coarsest level has bins to attend to (issue 24)
+CONFIGS["cpu-small-pdl"] = ModelConfig(**{**CONFIGS["cpu-small-pd"].__dict__, "name": "cpu-small-pdl",
+                                         "dropout_lattice": True})
 
 
 def get_config(name: str) -> ModelConfig:

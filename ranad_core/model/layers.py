@@ -42,19 +42,34 @@ class Layout:
         return Layout(self.offsets.to(device), self.height, self.width, self.pixels.to(device))
 
 
-def bin_dropout(layout: Layout, pattern: int) -> tuple[torch.Tensor, Layout]:
-    """Deterministic bin dropout (down-sampling): bin b of pixel (y, x) is kept when b + y + x + pattern is even.
+def lattice_parity(y: torch.Tensor, x: torch.Tensor, level: int) -> torch.Tensor:
+    """The pixel term of bin dropout's parity at down-sampling `level` (1: the first): a quincunx pyramid, so the
+    single-bin pixels a level keeps form a lattice twice as sparse as the level above's, never an empty one.
+    Level 1: y + x (a checkerboard); level 2: x (on the checkerboard's pixels, the even-even lattice or one of
+    its shifts); level 3: y//2 + x//2; level 4: x//2; ..."""
+    k = (level - 1) // 2
+    return (y >> k) + (x >> k) if level % 2 else x >> k
 
-    Every pixel keeps about half of its bins and single-bin pixels survive in a checkerboard, so each level holds
-    about half the bins; pattern 0/1 alternate between U-Nets so no bin is always dropped. Returns (kept row
-    indices into the fine layout, the coarse layout).
+
+def bin_dropout(layout: Layout, pattern: int, level: int = 1, lattice: bool = False) -> tuple[torch.Tensor, Layout]:
+    """Deterministic bin dropout (down-sampling): bin b of pixel (y, x) is kept when b + c + pattern is even,
+    c the pixel's parity term.
+
+    Every pixel keeps about half of its bins; pattern 0/1 alternate between U-Nets so no bin is always dropped.
+    With `lattice` (configs with dropout_lattice), c = lattice_parity(y, x, level), so single-bin pixels survive
+    in ever sparser lattices and each level holds about half the bins of the one above. Without it (the first
+    models), c = y + x at every level: a second level keeps no single-bin pixel at all (the checkerboard's pixels
+    all fail the other pattern), so on a typical frame it holds a few percent of the bins, those of multi-bin
+    pixels only. Returns (kept row indices into the fine layout, the coarse layout).
     """
     offs = layout.offsets
     counts = offs[1:] - offs[:-1]
     pix = layout.pixels[:, 0] * layout.width + layout.pixels[:, 1]
     first = torch.repeat_interleave(offs[:-1], counts, output_size=layout.bins)
     within = torch.arange(layout.bins, device=offs.device) - first
-    keep = (within + layout.pixels[:, 0] + layout.pixels[:, 1] + pattern) % 2 == 0
+    y, x = layout.pixels[:, 0], layout.pixels[:, 1]
+    parity = lattice_parity(y, x, level) if lattice else y + x
+    keep = (within + parity + pattern) % 2 == 0
     kept = torch.nonzero(keep, as_tuple=False).flatten()
     coarse = torch.bincount(pix[kept], minlength=counts.numel())
     coarse_offs = torch.cat([coarse.new_zeros(1), torch.cumsum(coarse, 0)])

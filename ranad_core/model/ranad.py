@@ -25,9 +25,9 @@ class RaNAD(nn.Module):
         c = config
         self.embed = nn.Sequential(nn.Linear(in_dim, c.dim), nn.ReLU(), nn.Linear(c.dim, c.dim))
         self.backbone = MultiUNet(c.dim, c.unets, c.levels, c.blocks_per_level, c.heads, c.head_dim, c.radius,
-                                  c.radius_growth, backend)
+                                  c.radius_growth, backend, c.dropout_lattice)
         self.recon = nn.ModuleDict({name: Reconstruction(c.dim, r.scales, r.heads, r.head_dim, r.radius,
-                                                         r.radius_growth, backend)
+                                                         r.radius_growth, backend, c.dropout_lattice)
                                     for name, r in c.recon.items()})
 
     def embeddings(self, inputs: ModelInputs) -> torch.Tensor:

@@ -67,9 +67,9 @@ class Reconstruction(nn.Module):
     """One output layer's reconstruction module (number of scales, radii and dropout pattern per layer)."""
 
     def __init__(self, dim: int, scales: int = 3, heads: int = 2, head_dim: int = 8, radius: float = 2.5,
-                 radius_growth: float = 1.0, backend: str = "auto"):
+                 radius_growth: float = 1.0, backend: str = "auto", lattice: bool = False):
         super().__init__()
-        self.scales = scales
+        self.scales, self.lattice = scales, lattice
         radii = [radius + radius_growth * s for s in range(scales)]
         self.down = nn.ModuleList(KernelAttention(dim, heads, head_dim, radii[s], backend) for s in range(scales - 1))
         self.per_scale = nn.ModuleList(KernelAttention(dim, heads, head_dim, radii[s], backend) for s in range(scales))
@@ -79,7 +79,7 @@ class Reconstruction(nn.Module):
         """feat [N, dim] backbone embeddings, noisy [N, C] layer values (any C: AOVs batch here) -> [N, C]."""
         feats, layouts, images = [feat], [layout], [noisy]
         for s in range(self.scales - 1):  # stage 1: the pyramid of blurred layers
-            kept, coarse = bin_dropout(layouts[-1], s % 2)
+            kept, coarse = bin_dropout(layouts[-1], s % 2, s + 1, self.lattice)
             q_feat = feats[-1][kept]
             images.append(self.down[s](q_feat, feats[-1], coarse.pixels, layouts[-1], images[-1]))
             feats.append(q_feat)
