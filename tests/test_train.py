@@ -471,3 +471,14 @@ def test_a_reconstruction_grown_by_a_scale_starts_from_the_init():
         grown_reconstruction(old, {**old, "recon.alpha.mixer.bias": torch.zeros(1)}, "x")
     with pytest.raises(RanadError, match="lacks"):
         grown_reconstruction({k: v for k, v in old.items() if k != "embed.0.bias"}, old, "x")
+
+
+def test_cross_frame_init_must_share_the_spatial_models_dropout(tmp_path):
+    """A sequence config on the lattice bin dropout refuses a spatial init trained without it (the weights would
+    load, the U-Nets would see other bins than they were trained on): exit 2, no run folder."""
+    ds = dataset_from_example(tmp_path / "ds")
+    run = tmp_path / "run"
+    r = CliRunner().invoke(cli, ["train", str(ds), "-o", str(run), "--steps", "1", "--crop", "16", "--config",
+                                 "cpu-small-pdl-xg", "--init", "cpu-small-pd-v2", "--freeze-spatial"])
+    assert r.exit_code == 2 and "dropout_lattice=False" in r.output, r.output
+    assert not run.exists()

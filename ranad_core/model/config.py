@@ -131,6 +131,11 @@ CONFIGS["cpu-small-pdl"] = ModelConfig(**{**CONFIGS["cpu-small-pd"].__dict__, "n
                                          "dropout_lattice": True})
 
 
+# the sequence model on cpu-small-pdl: cpu-small-pd-xg's temporal step over the lattice-dropout spatial model
+CONFIGS["cpu-small-pdl-xg"] = ModelConfig(**{**CONFIGS["cpu-small-pd-xg"].__dict__, "name": "cpu-small-pdl-xg",
+                                            "dropout_lattice": True})
+
+
 def get_config(name: str) -> ModelConfig:
     try:
         return CONFIGS[name]

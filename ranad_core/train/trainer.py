@@ -147,6 +147,10 @@ def build_model(cfg: TrainConfig, config):
         init = load_model(cfg.init).model
         if init.config.dim != config.dim or init.config.unets != config.unets:
             raise RanadError(f"--init model {init.config.name!r} does not match config {config.name!r}", cfg.init)
+        for flag in ("dropout_lattice", "demodulate"):   # the spatial model's behaviour, not in its weights' shapes
+            if getattr(init.config, flag) != getattr(config, flag):
+                raise RanadError(f"--init model {init.config.name!r} has {flag}={getattr(init.config, flag)}, "
+                                 f"config {config.name!r} {getattr(config, flag)}", cfg.init)
         if init.config.window > 1:
             if init.config.output_mix or not config.output_mix:
                 raise RanadError(f"--init: a cross-frame model starts only a config with the output mix (such as "
@@ -299,12 +303,12 @@ def train(cfg: TrainConfig, progress=None) -> dict:
     cross = config.window > 1
     consecutive = consecutive_pairs(cfg, cross, world)
     check_freeze(cfg, config)
-    os.makedirs(cfg.run, exist_ok=True)
     torch.manual_seed(cfg.seed)
     if world > 1 and cfg.device != "cpu":  # gloo averages CPU gradients; GPU data parallelism is not wired up
         raise RanadError("data-parallel training runs on the CPU only (one process on a GPU)", "--device")
     model = build_model(cfg, config).to(cfg.device)
     freeze_spatial(model, cfg)
+    os.makedirs(cfg.run, exist_ok=True)           # after every check: a refused run leaves no folder
     opt = torch.optim.AdamW(param_groups(model), lr=cfg.lr, weight_decay=cfg.weight_decay)
     rng = np.random.default_rng(cfg.seed if world == 1 else [cfg.seed, rank])
     step = 0
