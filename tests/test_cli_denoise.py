@@ -112,12 +112,8 @@ def test_threads_sets_torchs_threads_for_the_run(tmp_path, model_file, keep_torc
     assert r.exit_code == 2 and "--threads" in r.output and not (tmp_path / "t0.exr").exists()
 
 
-def test_max_memory_is_the_tile_budget(tmp_path, model_file, monkeypatch):
-    """--max-memory reaches the tile choice as bytes, less what the process holds and the frame's working copies
-    and the kernels' buffers need (so a larger ceiling gives the tiles exactly that much more), and the tile chosen
-    is the one used (recorded in the cache); a ceiling too small for one tile is an error."""
-    from ranad_core import memory
-
+def spy_on_tile_choice(monkeypatch) -> list:
+    """Records (budget, tile) of every tile choice shot.py makes (the real choice still decides)."""
     calls = []
     real = shot_mod.choose_tile
 
@@ -126,6 +122,16 @@ def test_max_memory_is_the_tile_budget(tmp_path, model_file, monkeypatch):
         return calls[-1][1]
 
     monkeypatch.setattr(shot_mod, "choose_tile", spy)
+    return calls
+
+
+def test_max_memory_is_the_tile_budget(tmp_path, model_file, monkeypatch):
+    """--max-memory reaches the tile choice as bytes, less what the process holds and the frame's working copies
+    and the kernels' buffers need (so a larger ceiling gives the tiles exactly that much more), and the tile chosen
+    is the one used (recorded in the cache); a ceiling too small for one tile is an error."""
+    from ranad_core import memory
+
+    calls = spy_on_tile_choice(monkeypatch)
     monkeypatch.setenv(memory.KERNEL_CACHE_ENV, "256")
     img = read_deep(FRAME)
     working = memory.frame_working_bytes([img], 0)
@@ -159,14 +165,7 @@ def test_gpu_free_memory_bounds_the_tiles(tmp_path, model_file, monkeypatch):
     from ranad_core import memory
 
     assert memory.device_free_bytes("cpu") == float("inf")
-    calls = []
-    real = shot_mod.choose_tile
-
-    def spy(offsets, width, height, halo, budget, frames=1):
-        calls.append((budget, real(offsets, width, height, halo, budget, frames)))
-        return calls[-1][1]
-
-    monkeypatch.setattr(shot_mod, "choose_tile", spy)
+    calls = spy_on_tile_choice(monkeypatch)
     img = read_deep(FRAME)
     need = denoise_mod.tile_bytes(img.offsets, img.width, img.height, denoise_mod.ALIGN, 0)
     for free in (float("inf"), 2 * need):
