@@ -2,8 +2,9 @@
 # The GPU path, checked and timed on a machine with a CUDA GPU: builds the CUDA RaNA kernels (and the CPU ones the
 # comparisons need), runs the GPU tests (tests/test_rana_cuda.py: kernels against the reference;
 # tests/test_gpu.py: shipped models, AOV reuse and the flat prior on the GPU against the CPU; `--device cuda`), then
-# bench/rana.py (CUDA against this machine's CPU kernels) and bench/denoise.py on a 1080p frame with `--device
-# cuda` (flat OIDN on the same GPU in the same run). Needs the package's dependencies importable (PYTHONPATH).
+# bench/rana.py (CUDA against this machine's CPU kernels; then the staged CUDA kernels against the one-thread ones)
+# and bench/denoise.py on a 1080p frame with `--device cuda` (flat OIDN on the same GPU in the same run). Each step
+# has a time limit, so that one that hangs does not hide the rest. Needs the package's dependencies importable.
 # Usage: bench/gpu_check.sh [FRAME.exr] [LOGDIR]   (FRAME: the deep frame bench/denoise.py tiles to 1080p)
 # TORCH_CUDA_ARCH_LIST (default: the GPU present) and TORCH_EXTENSIONS_DIR/RANAD_KERNEL_CACHE are honoured.
 set -uo pipefail
@@ -23,10 +24,11 @@ wait $cuda_pid; cuda_rc=$?; wait $cpu_pid; cpu_rc=$?
 echo "builds: CUDA rc $cuda_rc, CPU rc $cpu_rc, $(( $(date +%s) - t0 )) s"
 grep -i "error\|spill" "$LOG/build_cuda.log" | head -20
 [ $cuda_rc -eq 0 ] || { tail -30 "$LOG/build_cuda.log"; exit 1; }
-python3 -m pytest -q -rs -p no:cacheprovider tests/test_rana_cuda.py tests/test_gpu.py 2>&1 | tee "$LOG/tests.log" \
-  | tail -25
-python3 bench/rana.py --threads "$THREADS" --repeats 5 2>&1 | tee "$LOG/bench_rana.log"
+timeout 300 python3 -m pytest -q -rs -p no:cacheprovider tests/test_rana_cuda.py tests/test_gpu.py 2>&1 \
+  | tee "$LOG/tests.log" | tail -25
+timeout 120 python3 bench/rana.py --threads "$THREADS" --repeats 5 2>&1 | tee "$LOG/bench_rana.log"
+timeout 120 python3 bench/rana.py --device cuda --repeats 5 --chunks 16,32,64 2>&1 | tee "$LOG/bench_rana_cuda.log"
 if [ -n "$FRAME" ]; then
-  python3 bench/denoise.py --device cuda --threads "$THREADS" --real '' --frame "$FRAME" --args=--profile 2>&1 \
-    | tee "$LOG/bench_denoise_cuda.log"
+  timeout 240 python3 bench/denoise.py --device cuda --threads "$THREADS" --real '' --frame "$FRAME" \
+    --args=--profile 2>&1 | tee "$LOG/bench_denoise_cuda.log"
 fi

@@ -6,7 +6,10 @@ pair per head, the usual attention count: q.k and p.v, multiply and add), peak m
 the speed-up over the reference on a size the reference can handle (``--ref-size``).
 Torch's allocator is asked for transparent huge pages, as the ranad CLI does (THP_MEM_ALLOC_ENABLE=0 to compare).
 Both memory layouts of q, k, v are measured at --size (see problem()).
+With a GPU, the CUDA kernels run the same problem too; `--device cuda` runs only them: the staged design (the
+default, at each --chunks size) against the one-thread design it replaced, in the same process.
 Usage: python bench/rana.py [--size 512 --radius 3.5 --heads 4 --dim 16 --threads N --layout both --repeats 5]
+                            [--device cuda --chunks 16,32,64]
 """
 
 from __future__ import annotations
@@ -120,8 +123,14 @@ def main() -> None:
     ap.add_argument("--layout", choices=("natural", "channel-major", "both"), default="both",
                     help="memory layout of q, k, v at --size (both are [N, heads, d] tensors; see problem()); "
                          "channel-major is what the model's projections write, natural needs two copies per call")
+    ap.add_argument("--device", choices=("cpu", "cuda"), default="cpu",
+                    help="cuda: only the CUDA kernels, staged (at each --chunks) against one-thread")
+    ap.add_argument("--chunks", default="16,32,64,128", help="rows per shared-memory chunk of the staged CUDA kernels")
     args = ap.parse_args()
     torch.set_num_threads(args.threads)
+    if args.device == "cuda":
+        cuda_designs(args)
+        return
     flop = 4 * args.dim * args.heads
     layouts = ("channel-major", "natural") if args.layout == "both" else (args.layout,)
     print(f"RaNA bench: radius {args.radius}, {args.heads} heads x {args.dim}, {args.threads} threads, "
@@ -152,6 +161,29 @@ def main() -> None:
     print(f"peak resident memory: {peak_cpp:.0f} MB after the C++ runs at {args.size}x{args.size}, "
           f"{resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024:.0f} MB after the reference at "
           f"{args.ref_size}x{args.ref_size} (its pair list is materialised)")
+
+
+def cuda_designs(args) -> None:
+    """The staged CUDA kernels at each chunk size against the one-thread kernels, same problem, same process."""
+    from ranad_core.rana.extension import load_cuda_extension
+
+    if not torch.cuda.is_available():
+        raise SystemExit("bench/rana.py --device cuda: no CUDA GPU here")
+    ext = load_cuda_extension()
+    layout = "channel-major" if args.layout == "both" else args.layout
+    print(f"RaNA CUDA bench on {torch.cuda.get_device_name()}: {args.size}x{args.size} {layout}, radius "
+          f"{args.radius}, {args.heads} heads x {args.dim}, best of {args.repeats}, torch {torch.__version__}")
+    designs = [("one-thread", False, 0)] + [(f"staged, {c} rows/chunk", True, int(c)) for c in args.chunks.split(",")]
+    base = None
+    for label, staged, chunk in designs:
+        ext.configure(staged, chunk)
+        run(args.size, args.radius, args.heads, args.dim, "cuda", 1, layout)  # warm-up (and the build)
+        fwd, both, pairs, bins = run(args.size, args.radius, args.heads, args.dim, "cuda", args.repeats, layout)
+        base = base or (fwd, both)
+        print(f"{label:24s} ({bins} bins, {pairs / 1e6:.1f} M pairs): forward {fwd * 1e3:8.2f} ms = "
+              f"{pairs / fwd / 1e6:8.1f} M pairs/s | forward+backward {both * 1e3:8.2f} ms = "
+              f"{pairs / both / 1e6:8.1f} M pairs/s | {base[0] / fwd:.2f}x / {base[1] / both:.2f}x one-thread")
+    ext.configure(True, 64)
 
 
 if __name__ == "__main__":

@@ -19,11 +19,13 @@ else
 fi
 pids=()
 for a in $ARCHS; do
-  ( nvcc -std=c++20 -O3 --expt-relaxed-constexpr -gencode "arch=compute_$a,code=sm_$a" -Xptxas -warn-spills \
-      -I. -c rana_cuda_kernels.cu -o "$OUT/rana_cuda_kernels_sm$a.o" > "$OUT/sm$a.log" 2>&1 \
-    && echo "nvcc sm_$a: rana_cuda_kernels.cu OK ($(grep -c 'spilled' "$OUT/sm$a.log" || true) kernels with register spills)" \
-    || { echo "nvcc sm_$a: FAILED"; cat "$OUT/sm$a.log"; exit 1; } ) &
-  pids+=($!)
+  for src in rana_cuda_kernels rana_cuda_staged; do
+    ( nvcc -std=c++20 -O3 --expt-relaxed-constexpr -gencode "arch=compute_$a,code=sm_$a" -Xptxas -warn-spills \
+        -I. -c $src.cu -o "$OUT/${src}_sm$a.o" > "$OUT/${src}_sm$a.log" 2>&1 \
+      && echo "nvcc sm_$a: $src.cu OK ($(grep -c 'spilled' "$OUT/${src}_sm$a.log" || true) kernels with spills)" \
+      || { echo "nvcc sm_$a: $src.cu FAILED"; cat "$OUT/${src}_sm$a.log"; exit 1; } ) &
+    pids+=($!)
+  done
 done
 PY=${PYTHON:-python}
 if ! command -v g++ >/dev/null; then

@@ -145,9 +145,20 @@ std::vector<torch::Tensor> rana_backward(torch::Tensor dout, torch::Tensor q, to
   return {unpad(dq, H, dk), unpad(dk_t, H, dk), unpad(dv_t, H, dv), dbias};
 }
 
+// The process-wide choice between the staged and the one-thread kernels (benchmarks and tests compare them in one
+// process); max_chunk <= 0 leaves the chunk size. Returns the options now in force.
+std::tuple<bool, int64_t> configure(bool staged, int64_t max_chunk) {
+  auto& o = rana_cuda::staged_options();
+  o.enabled = staged;
+  if (max_chunk > 0) o.max_chunk = int(max_chunk);
+  return {o.enabled, o.max_chunk};
+}
+
 }  // namespace
 
 PYBIND11_MODULE(TORCH_EXTENSION_NAME, m) {
+  m.def("configure", &configure, "staged kernels on or off, and their rows per shared-memory chunk",
+        pybind11::arg("staged") = true, pybind11::arg("max_chunk") = 0);
   m.def("forward", &rana_forward, "RaNA forward (CUDA): returns (out, lse)");
   m.def("backward", &rana_backward, "RaNA backward (CUDA): returns (dq, dk, dv, dbias)");
 }

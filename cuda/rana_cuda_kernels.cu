@@ -1,4 +1,6 @@
-// The CUDA RaNA kernels: the block bodies of rana_math.h with one lane per thread (L = 1), i.e. exactly the code the
+// The one-thread CUDA RaNA kernels, and the entry points that pick them or the staged kernels (rana_cuda_staged.cu,
+// used where they support the case). The one-thread kernels: the block bodies of rana_math.h with one lane per
+// thread (L = 1), i.e. exactly the code the
 // CPU tests run with `backend="cpu-scalar"`. One thread per (entry, head): blockIdx.y is the head, so the threads of
 // a CUDA block share a head and walk neighbouring discs (entries in layout order are neighbouring pixels).
 // Backward: dQ per query thread; dK/dV per key thread from the reverse neighbourhood, no atomics; the bias gradient
@@ -110,6 +112,7 @@ dim3 grid_for(int64_t n, int H) { return dim3(unsigned((n + kThreads - 1) / kThr
 template <typename T>
 void forward(const rana::Op<T>& op, const rana::Operand<T>& q, const T* kt, const T* vt, const int64_t* qpix,
              int64_t nq, T* out, T* lse, void* stream) {
+  if (staged_options().enabled && staged_forward(op, q, kt, vt, qpix, nq, out, lse, stream)) return;
   if (nq == 0) return;
   rana::dispatch_head_dims<T>(op.dk, op.dv, [&]<int DK, int DV>() {
     forward_kernel<T, DK, DV><<<grid_for(nq, op.H), kThreads, 0, cudaStream_t(stream)>>>(op, q, kt, vt, qpix, nq,
@@ -122,6 +125,7 @@ template <typename T>
 void backward_dq(const rana::Op<T>& op, const rana::Operand<T>& q, const rana::Operand<T>& dout, const T* lse,
                  const T* delta, const T* kt, const T* vt, const int64_t* qpix, int64_t nq,
                  const rana::Output<T>& dq, void* stream) {
+  if (staged_options().enabled && staged_backward_dq(op, q, dout, lse, delta, kt, vt, qpix, nq, dq, stream)) return;
   if (nq == 0) return;
   rana::dispatch_head_dims<T>(op.dk, op.dv, [&]<int DK, int DV>() {
     dq_kernel<T, DK, DV><<<grid_for(nq, op.H), kThreads, 0, cudaStream_t(stream)>>>(op, q, dout, lse, delta, kt, vt,
@@ -135,6 +139,9 @@ void backward_dkdv(const rana::Op<T>& op, const T* qst, const T* dost, const T* 
                    const rana::Operand<T>& k, const rana::Operand<T>& v, const int64_t* q_ptr, const int64_t* kpix,
                    int64_t nk, const rana::Output<T>& dk, const rana::Output<T>& dv, T* dbias, T* partial,
                    void* stream) {
+  if (staged_options().enabled &&
+      staged_backward_dkdv(op, qst, dost, lse_s, delta_s, k, v, q_ptr, kpix, nk, dk, dv, dbias, partial, stream))
+    return;
   const int side = 2 * op.rows.R + 1;
   if (dbias && op.rows.R > kMaxRadius)
     throw std::invalid_argument("RaNA CUDA: the bias gradient supports radii below 8");

@@ -130,7 +130,7 @@ def cpu_extension_or_none():
 
 
 # ---- CUDA ---------------------------------------------------------------------------------------------------
-CUDA_SOURCES = ("rana_cuda.cpp", "rana_cuda_kernels.cu")
+CUDA_SOURCES = ("rana_cuda.cpp", "rana_cuda_kernels.cu", "rana_cuda_staged.cu")
 CUDA_HEADERS = ("rana_math.h", "rana_binding.h", "rana_cuda_kernels.h")
 CUDA_ARCHS = ("80", "86", "89", "90")   # what CI compiles for (cuda/check_build.sh)
 

@@ -6,8 +6,9 @@ shapes) so it composes with autograd and torch.compile. Backends, picked by ``ba
 * ``"cpu"``: the C++/OpenMP kernels (``cuda/rana_cpu.cpp``), built on first use;
 * ``"cpu-scalar"``: the same kernels with one lane per block, i.e. the bodies exactly as a GPU thread runs
   them (head dimensions up to 16; slow; for tests);
-* ``"cuda"``: the CUDA kernels (``cuda/rana_cuda*.cpp/.cu``, the same block bodies with one lane per thread),
-  built on first use with nvcc;
+* ``"cuda"``: the CUDA kernels (``cuda/rana_cuda*.cpp/.cu``: blocks of neighbouring queries sharing their keys
+  through shared memory, or the same block bodies with one lane per thread where those do not fit), built on
+  first use with nvcc;
 * ``"reference"``: the plain-torch oracle (:mod:`.reference`), any device, slow and memory-hungry;
 * ``"auto"`` (default): the kernels of the tensors' device when they build, the reference otherwise.
 """
