@@ -60,8 +60,8 @@ def parse_bytes(text: str) -> float:
               help="Also write the noisy versions of the replaced channels under PREFIX (e.g. 'noisy.').")
 @click.option("--keep-depth", is_flag=True,
               help="Write the input's depths (Z, ZBack) unchanged instead of denoised ones. On scene families "
-                   "held out of training the shipped models' per-bin depth error is up to 1.85x the noisy "
-                   "input's (in-family it is lower; model card of cpu-small-pd-v3).")
+                   "held out of training the shipped models' per-bin depth error is up to 2.04x the noisy "
+                   "input's (in-family it is lower; model card of cpu-small-pd-v4).")
 @click.option("--tile", type=click.IntRange(16), default=None,
               help="Tile size in pixels (default: the largest that fits --max-memory).")
 @click.option("--halo", type=click.IntRange(0), default=None,
