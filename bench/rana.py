@@ -9,7 +9,7 @@ Both memory layouts of q, k, v are measured at --size (see problem()).
 With a GPU, the CUDA kernels run the same problem too; `--device cuda` runs only them: the staged design (the
 default, at each --chunks size) against the one-thread design it replaced, in the same process.
 Usage: python bench/rana.py [--size 512 --radius 3.5 --heads 4 --dim 16 --threads N --layout both --repeats 5]
-                            [--device cuda --chunks 16,32,64]
+                            [--device cuda --chunks 16,32,64,128]
 """
 
 from __future__ import annotations
@@ -170,6 +170,7 @@ def cuda_designs(args) -> None:
     if not torch.cuda.is_available():
         raise SystemExit("bench/rana.py --device cuda: no CUDA GPU here")
     ext = load_cuda_extension()
+    before = ext.configure(True, 0)  # the options in force, restored at the end
     layout = "channel-major" if args.layout == "both" else args.layout
     print(f"RaNA CUDA bench on {torch.cuda.get_device_name()}: {args.size}x{args.size} {layout}, radius "
           f"{args.radius}, {args.heads} heads x {args.dim}, best of {args.repeats}, torch {torch.__version__}")
@@ -183,7 +184,7 @@ def cuda_designs(args) -> None:
         print(f"{label:24s} ({bins} bins, {pairs / 1e6:.1f} M pairs): forward {fwd * 1e3:8.2f} ms = "
               f"{pairs / fwd / 1e6:8.1f} M pairs/s | forward+backward {both * 1e3:8.2f} ms = "
               f"{pairs / both / 1e6:8.1f} M pairs/s | {base[0] / fwd:.2f}x / {base[1] / both:.2f}x one-thread")
-    ext.configure(True, 64)
+    ext.configure(*before)
 
 
 if __name__ == "__main__":
