@@ -161,12 +161,14 @@ void backward_dkdv(const rana::Op<T>& op, const T* qst, const T* dost, const T* 
                                                                                  q_ptr, kpix, nk, dk, dv, partial);
   });
   check(cudaGetLastError(), "dK/dV launch");
-  if (dbias) {
-    const int64_t n = int64_t(op.H) * side * side;
-    sum_partials<T><<<unsigned((n + 255) / 256), 256, 0, cudaStream_t(stream)>>>(partial, grid.x, op.H, side * side,
-                                                                                 dbias);
-    check(cudaGetLastError(), "bias-gradient reduction launch");
-  }
+  if (dbias) sum_bias_partials(partial, grid.x, op.H, side * side, dbias, stream);
+}
+
+template <typename T>
+void sum_bias_partials(const T* partial, int64_t blocks, int H, int side2, T* dbias, void* stream) {
+  const int64_t n = int64_t(H) * side2;
+  sum_partials<T><<<unsigned((n + 255) / 256), 256, 0, cudaStream_t(stream)>>>(partial, blocks, H, side2, dbias);
+  check(cudaGetLastError(), "bias-gradient reduction launch");
 }
 
 #define RANA_CUDA_INSTANTIATE(T)                                                                                   \
@@ -177,7 +179,8 @@ void backward_dkdv(const rana::Op<T>& op, const T* qst, const T* dost, const T* 
                                void*);                                                                            \
   template void backward_dkdv<T>(const rana::Op<T>&, const T*, const T*, const T*, const T*,                      \
                                  const rana::Operand<T>&, const rana::Operand<T>&, const int64_t*, const int64_t*, \
-                                 int64_t, const rana::Output<T>&, const rana::Output<T>&, T*, T*, void*);
+                                 int64_t, const rana::Output<T>&, const rana::Output<T>&, T*, T*, void*);       \
+  template void sum_bias_partials<T>(const T*, int64_t, int, int, T*, void*);
 
 RANA_CUDA_INSTANTIATE(float)
 RANA_CUDA_INSTANTIATE(double)

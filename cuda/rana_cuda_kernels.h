@@ -39,6 +39,11 @@ void backward_dkdv(const rana::Op<T>& op, const T* qst, const T* dost, const T* 
                    int64_t nk, const rana::Output<T>& dk, const rana::Output<T>& dv, T* dbias, T* partial,
                    void* stream);
 
+// dbias[h, e] = the sum over blocks of partial[h][block][e] (e < side2), blocks in order: the last step of the bias
+// gradient of both kernel designs.
+template <typename T>
+void sum_bias_partials(const T* partial, int64_t blocks, int H, int side2, T* dbias, void* stream);
+
 // ---- staged kernels (rana_cuda_staged.cu) --------------------------------------------------------------
 // A block of kThreads / H neighbouring entries x H heads shares the rows it streams through shared memory (see the
 // file's header). forward / backward_dq / backward_dkdv above use them when staged_options().enabled and they

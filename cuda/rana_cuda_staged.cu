@@ -349,17 +349,6 @@ __global__ void __launch_bounds__(kThreads, min_blocks<T, DK, DV>())
   }
 }
 
-// dbias[h, e] = sum over blocks of partial[h, block, e], blocks in order.
-template <typename T>
-__global__ void sum_block_partials(const T* partial, int64_t blocks, int H, int side2, T* dbias) {
-  const int64_t i = int64_t(blockIdx.x) * blockDim.x + threadIdx.x;
-  if (i >= int64_t(H) * side2) return;
-  const int h = int(i / side2), e = int(i % side2);
-  T acc = T(0);
-  for (int64_t b = 0; b < blocks; ++b) acc += partial[(int64_t(h) * blocks + b) * side2 + e];
-  dbias[i] = acc;
-}
-
 int max_dynamic_smem() {
   int dev = 0, bytes = 0;
   check(cudaGetDevice(&dev), "device query");
@@ -389,11 +378,16 @@ StagedOptions& staged_options() {
   return options;
 }
 
-bool staged_supported(int H) { return H >= 1 && kThreads / H >= 1 && kThreads / H <= kStagedMaxEntries; }
+bool staged_supported(int H) { return H >= 1 && H <= kThreads; }  // kThreads / H entries per block, >= 1
 
-template <typename T>
-bool staged_forward(const rana::Op<T>& op, const rana::Operand<T>& q, const T* kt, const T* vt, const int64_t* qpix,
-                    int64_t nq, T* out, T* lse, void* stream) {
+namespace {
+
+// The forward (DQ = false: q, kt, vt -> out, lse) and the dQ pass (DQ = true: also dout, lse, delta -> dq) share
+// their launch: the same blocks, chunk size and shared memory. False where the staged kernel does not fit.
+template <typename T, bool DQ>
+bool launch_query(const rana::Op<T>& op, const rana::Operand<T>& q, const rana::Operand<T>& dout, const T* lse_in,
+                  const T* delta, const T* kt, const T* vt, const int64_t* qpix, int64_t nq, T* out, T* lse_out,
+                  const rana::Output<T>& dq, void* stream) {
   if (!staged_supported(op.H)) return false;
   const int kc = chunk_rows<T>(op.dk * op.H, op.dv * op.H, 0, 0);
   if (kc == 0) return false;
@@ -402,34 +396,29 @@ bool staged_forward(const rana::Op<T>& op, const rana::Operand<T>& q, const T* k
   const size_t bytes = chunk_bytes<T>(kc, op.dk * op.H, op.dv * op.H, 0);
   const unsigned blocks = unsigned((nq + qb - 1) / qb);
   rana::dispatch_head_dims<T>(op.dk, op.dv, [&]<int DK, int DV>() {
-    auto kern = query_kernel<T, DK, DV, false>;
+    auto kern = query_kernel<T, DK, DV, DQ>;
     allow_smem(kern, bytes);
-    kern<<<blocks, kThreads, bytes, cudaStream_t(stream)>>>(op, q, rana::Operand<T>{}, nullptr, nullptr, kt, vt,
-                                                            qpix, nq, kc, out, lse, rana::Output<T>{});
+    kern<<<blocks, kThreads, bytes, cudaStream_t(stream)>>>(op, q, dout, lse_in, delta, kt, vt, qpix, nq, kc, out,
+                                                            lse_out, dq);
   });
-  check(cudaGetLastError(), "forward launch");
+  check(cudaGetLastError(), DQ ? "dQ launch" : "forward launch");
   return true;
+}
+
+}  // namespace
+
+template <typename T>
+bool staged_forward(const rana::Op<T>& op, const rana::Operand<T>& q, const T* kt, const T* vt, const int64_t* qpix,
+                    int64_t nq, T* out, T* lse, void* stream) {
+  return launch_query<T, false>(op, q, rana::Operand<T>{}, nullptr, nullptr, kt, vt, qpix, nq, out, lse,
+                                rana::Output<T>{}, stream);
 }
 
 template <typename T>
 bool staged_backward_dq(const rana::Op<T>& op, const rana::Operand<T>& q, const rana::Operand<T>& dout, const T* lse,
                         const T* delta, const T* kt, const T* vt, const int64_t* qpix, int64_t nq,
                         const rana::Output<T>& dq, void* stream) {
-  if (!staged_supported(op.H)) return false;
-  const int kc = chunk_rows<T>(op.dk * op.H, op.dv * op.H, 0, 0);
-  if (kc == 0) return false;
-  if (nq == 0) return true;
-  const int qb = kThreads / op.H;
-  const size_t bytes = chunk_bytes<T>(kc, op.dk * op.H, op.dv * op.H, 0);
-  const unsigned blocks = unsigned((nq + qb - 1) / qb);
-  rana::dispatch_head_dims<T>(op.dk, op.dv, [&]<int DK, int DV>() {
-    auto kern = query_kernel<T, DK, DV, true>;
-    allow_smem(kern, bytes);
-    kern<<<blocks, kThreads, bytes, cudaStream_t(stream)>>>(op, q, dout, lse, delta, kt, vt, qpix, nq, kc, nullptr,
-                                                            nullptr, dq);
-  });
-  check(cudaGetLastError(), "dQ launch");
-  return true;
+  return launch_query<T, true>(op, q, dout, lse, delta, kt, vt, qpix, nq, nullptr, nullptr, dq, stream);
 }
 
 template <typename T>
@@ -463,12 +452,7 @@ bool staged_backward_dkdv(const rana::Op<T>& op, const T* qst, const T* dost, co
     }
   });
   check(cudaGetLastError(), "dK/dV launch");
-  if (dbias) {
-    const int64_t n = int64_t(op.H) * side * side;
-    sum_block_partials<T><<<unsigned((n + 255) / 256), 256, 0, cudaStream_t(stream)>>>(partial, blocks, op.H,
-                                                                                       side * side, dbias);
-    check(cudaGetLastError(), "bias-gradient reduction launch");
-  }
+  if (dbias) sum_bias_partials(partial, int64_t(blocks), op.H, side * side, dbias, stream);
   return true;
 }
 
