@@ -65,7 +65,8 @@ def _loss_weight(text: str) -> tuple[str, float]:
               help="Override a loss term's weight (repeatable). Terms and defaults: " + ", ".join(
                   f"{k}={v:g}" for k, v in WEIGHTS.items()) + ". 'separation' compares the composites of the bins in "
                   "front of and behind the crop's median depth, each alone (what a holdout sees); 'separation_ssim' "
-                  "adds the SSIM term on those two composites.")
+                  "adds the SSIM term on those two composites; 'edit' and 'edit_ssim' score the compositing edit "
+                  "that `ranad eval` scores (front recoloured, a layer inserted at that depth).")
 @device_option("the model trains", " Crops are made on the CPU either way; data-parallel --processes run on the "
                "CPU.")
 def train_cmd(datasets, run, config, steps, crop, lr, seed, checkpoint_every, processes, p_no_aux, p_no_split, window,

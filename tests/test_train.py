@@ -348,6 +348,70 @@ def test_separation_loss_sees_colour_moved_between_depth_layers():
     assert on["composite"] == off["composite"] == pytest.approx(0, abs=1e-7)
 
 
+def _random_layers(seed: int, pixels: int = 40):
+    """A ragged stack of sorted, semi-transparent premultiplied bins, as a loss dict and as a DeepImage (R G B A Z),
+    with an even number of bins and distinct depths (so the median depth is no bin's: the front/back split is
+    unambiguous)."""
+    from ranad_core.deep import DeepImage
+
+    rng = np.random.default_rng(seed)
+    counts = rng.integers(0, 5, size=pixels)
+    counts[-1] += counts.sum() % 2
+    offsets = np.concatenate([[0], np.cumsum(counts)])
+    n = int(offsets[-1])
+    alpha = rng.uniform(0.05, 0.95, n)
+    rgb = rng.uniform(0, 3, (n, 3)) * alpha[:, None]
+    z = rng.permutation(np.linspace(1, 9, n))
+    for p in range(pixels):
+        z[offsets[p]:offsets[p + 1]].sort()
+    values = np.concatenate([rgb, alpha[:, None], z[:, None]], axis=1)
+    img = DeepImage(values=values.astype(np.float64), offsets=offsets, channels=["R", "G", "B", "A", "Z"],
+                    data_window=(0, 0, pixels - 1, 0), display_window=(0, 0, pixels - 1, 0),
+                    channel_types={c: "float" for c in "RGBAZ"})
+    t = torch.from_numpy
+    layers = {"diffuse": t(rgb), "specular": torch.zeros(n, 3, dtype=torch.float64), "alpha": t(alpha[:, None]),
+              "depth": t(z[:, None])}
+    return layers, img, torch.from_numpy(offsets)
+
+
+def test_edit_loss_image_is_the_edit_eval_scores():
+    """The loss's compositing edit (front recoloured, the layer inserted at the median depth, flattened) equals
+    metrics.composite_edit, the edit `ranad eval` scores, on random ragged stacks; at exposure scale s it is the
+    edit of the image divided by s."""
+    from ranad_core.metrics import composite_edit, split_depth
+    from ranad_core.train.losses import depth_slices, edit_image
+
+    for seed in range(3):
+        layers, img, offsets = _random_layers(seed)
+        (front, _), (back, _) = depth_slices(layers, layers, offsets)
+        oracle = composite_edit(img, split_depth(img)).reshape(-1, 3)
+        assert np.allclose(edit_image(front, back).numpy(), oracle, rtol=1e-5, atol=1e-6)   # metrics flattens in float32
+        scaled = img.with_values(img.values * np.array([4, 4, 4, 1, 1]))
+        big = {**layers, "diffuse": layers["diffuse"] * 4}
+        (front4, _), (back4, _) = depth_slices(big, big, offsets)
+        assert np.allclose(edit_image(front4, back4, 4.0).numpy(), oracle, rtol=1e-5, atol=1e-6)
+        assert not np.allclose(composite_edit(scaled, split_depth(img)).reshape(-1, 3), 4 * oracle)
+
+
+def test_edit_loss_sees_front_alpha_the_composite_hides_less():
+    """Halving the front bins' alpha and colour (premultiplied: the front layer made more transparent) changes the
+    edit; the edit terms are zero for the reference itself, positive for the change, and computed only when
+    weighted."""
+    from ranad_core.train.losses import total_loss
+
+    layers, _, offsets = _random_layers(7, pixels=64)
+    z = layers["depth"][:, 0]
+    front = (z < torch.quantile(z, 0.5)).to(z.dtype)[:, None]
+    thin = {**layers, "diffuse": layers["diffuse"] * (1 - front / 2), "alpha": layers["alpha"] * (1 - front / 2)}
+    weights = {"edit": 1.0, "edit_ssim": 1.0}
+    _, same = total_loss(layers, layers, offsets, (8, 8), weights=weights)
+    _, off = total_loss(thin, layers, offsets, (8, 8))
+    _, on = total_loss(thin, layers, offsets, (8, 8), weights=weights)
+    assert same["edit"] == pytest.approx(0, abs=1e-9) and same["edit_ssim"] == pytest.approx(0, abs=1e-6)
+    assert "edit" not in off and "edit_ssim" not in off
+    assert on["edit"] > 0.02 and on["edit_ssim"] > 0
+
+
 def test_separation_ssim_sees_structure_moved_between_depth_layers():
     """8x8 pixels, each a transparent front bin (alpha 0) over an opaque back bin; the reference's front layer holds
     a checker. Moving the front colour into the back bin on the checker's dark squares leaves every composite

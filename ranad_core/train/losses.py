@@ -3,7 +3,11 @@ plus an SSIM term on the tone-mapped image (structure the per-pixel terms miss: 
 alpha and relative L1 on depth; optionally (weight 0 by default) depth-separation terms: SMAPE (`separation`) and
 the SSIM term (`separation_ssim`) of the composites of the bins in front of and behind the crop's median reference
 depth, each flattened alone, which is what a compositor's holdout or insertion sees (colour moved between depth
-layers, wrong alpha; blotches within one layer that the full composite hides). For cross-frame
+layers, wrong alpha; blotches within one layer that the full composite hides); and (weight 0 by default) the
+compositing edit itself, as `ranad eval` scores it (metrics.composite_edit): the front bins recoloured, a
+semi-transparent layer inserted at the median depth, then flattened; SMAPE (`edit`) and the SSIM term
+(`edit_ssim`) on it. The edit weighs the front composite's alpha (how much of the inserted layer and the back shows
+through), which the per-bin alpha L1 and the separation terms see only indirectly. For cross-frame
 training on consecutive frames, a temporal term: L1 between the change of the tone-mapped composite from one frame
 to the next and the reference's change (the flicker that `ranad eval --temporal` measures)."""
 
@@ -12,7 +16,7 @@ from __future__ import annotations
 import torch
 
 from ..deep import flatten_torch
-from ..metrics import ssim, tonemap
+from ..metrics import INSERT_ALPHA, INSERT_COLOUR, RECOLOUR_GAIN, ssim, tonemap
 from .weights import WEIGHTS
 
 
@@ -20,25 +24,41 @@ def smape(pred: torch.Tensor, target: torch.Tensor, eps: float = 1e-2) -> torch.
     return ((pred - target).abs() / (pred.abs() + target.abs() + eps)).mean()
 
 
-def composite(layers: dict, offsets: torch.Tensor) -> torch.Tensor:
-    """Flattened colour [P, 3] of diffuse + specular (premultiplied) with alpha, front to back."""
+def composite_rgba(layers: dict, offsets: torch.Tensor) -> torch.Tensor:
+    """Flattened colour and alpha [P, 4] of diffuse + specular (premultiplied) with alpha, front to back."""
     rgb = layers["diffuse"] + layers["specular"]
-    values = torch.cat([rgb, layers["alpha"]], dim=1)
-    return flatten_torch(values, offsets, 3)[:, :3]
+    return flatten_torch(torch.cat([rgb, layers["alpha"]], dim=1), offsets, 3)
+
+
+def composite(layers: dict, offsets: torch.Tensor) -> torch.Tensor:
+    """Flattened colour [P, 3] (composite_rgba without its alpha)."""
+    return composite_rgba(layers, offsets)[:, :3]
 
 
 def depth_slices(pred: dict, ref: dict, offsets: torch.Tensor) -> list:
-    """[(pred, ref)] composites [P, 3] of the bins in front of and behind the crop's median reference depth, each
-    flattened alone (the split follows the reference so both sides hold the same bins): what a compositor's
-    holdout or insertion sees."""
+    """[(pred, ref)] composites [P, 4] (colour, alpha) of the bins in front of and behind the crop's median
+    reference depth, each flattened alone (the split follows the reference so both sides hold the same bins): what
+    a compositor's holdout or insertion sees."""
     z = ref["depth"][:, 0]
     front = (z < torch.quantile(z, 0.5)).to(z.dtype)[:, None]   # the median as metrics.split_depth takes it
-    return [(composite(_masked(pred, m), offsets), composite(_masked(ref, m), offsets)) for m in (front, 1 - front)]
+    return [(composite_rgba(_masked(pred, m), offsets), composite_rgba(_masked(ref, m), offsets))
+            for m in (front, 1 - front)]
 
 
 def separation(slices: list) -> torch.Tensor:
-    """Mean SMAPE of the front and back composites (depth_slices)."""
-    return sum(smape(p, r) for p, r in slices) / len(slices)
+    """Mean SMAPE of the front and back composites' colour (depth_slices)."""
+    return sum(smape(p[:, :3], r[:, :3]) for p, r in slices) / len(slices)
+
+
+def edit_image(front: torch.Tensor, back: torch.Tensor, scale: float = 1.0) -> torch.Tensor:
+    """[P, 3]: metrics.composite_edit from the two depth_slices composites [P, 4] of one image: the front
+    recoloured, then over the inserted layer, then over the back. `scale`: the frame's exposure scale; the colours
+    are divided by it first, so the inserted layer sits at the same place relative to the scene's brightness
+    whatever the render's exposure."""
+    gain = front.new_tensor(RECOLOUR_GAIN)
+    layer = front.new_tensor(INSERT_COLOUR)
+    behind = layer + (1 - INSERT_ALPHA) * back[:, :3] / scale
+    return gain * front[:, :3] / scale + (1 - front[:, 3:4]) * behind
 
 
 def _masked(layers: dict, mask: torch.Tensor) -> dict:
@@ -58,12 +78,21 @@ def total_loss(pred: dict, ref: dict, offsets: torch.Tensor, size: tuple[int, in
              "depth": ((pred["depth"] - ref["depth"]).abs() / (ref["depth"].abs() + 1e-3)).mean()}
     img = lambda x: tonemap(x / scale).T.reshape(3, h, w)  # noqa: E731
     structure = h >= 4 and w >= 4                             # SSIM needs its window
-    if weights["separation"] > 0 or (weights["separation_ssim"] > 0 and structure):
+    wants = {k: weights[k] > 0 and (structure or not k.endswith("ssim"))
+             for k in ("separation", "separation_ssim", "edit", "edit_ssim")}
+    if any(wants.values()):
         slices = depth_slices(pred, ref, offsets)
-        if weights["separation"] > 0:
+        if wants["separation"]:
             parts["separation"] = separation(slices)
-        if weights["separation_ssim"] > 0 and structure:
-            parts["separation_ssim"] = sum(1 - ssim(img(p), img(r)) for p, r in slices) / len(slices)
+        if wants["separation_ssim"]:
+            parts["separation_ssim"] = sum(1 - ssim(img(p[:, :3]), img(r[:, :3])) for p, r in slices) / len(slices)
+        if wants["edit"] or wants["edit_ssim"]:
+            (fp, fr), (bp, br) = slices
+            ep, er = edit_image(fp, bp, scale), edit_image(fr, br, scale)
+            if wants["edit"]:
+                parts["edit"] = smape(ep, er)
+            if wants["edit_ssim"]:
+                parts["edit_ssim"] = 1 - ssim(img(ep * scale), img(er * scale))
     cp, cr = composite(pred, offsets), composite(ref, offsets)
     parts["composite"] = smape(cp, cr)
     if structure:
