@@ -5,16 +5,19 @@ The shot is the bundled example's three frames (`examples/synth_shot`, with per-
 played forth and back (0 1 2 1 0) so that most frames have a full window of three; the motion of the returning
 frames points the wrong way, which changes what the temporal step finds but not what it costs. Every run is a
 separate `ranad denoise` process over the whole shot (model load, reads, denoise, writes); the ratio is of the
-whole runs, so the per-shot overheads count too.
+whole runs, so the per-shot overheads count too. With --repeat N the models run in N interleaved rounds (single,
+cross, ..., single, cross, ...) and each model's median is used: one run each was at the mercy of the order
+(the first run of a process tree pays for cold caches; this machine's runs vary by 20%).
 
 Usage: python bench/shot.py [--size 960x540] [--threads 2] [--single cpu-small-pd-v2] [--cross cpu-small-pd-xg-v2]
-           [--cross ANOTHER ...] [--args "--profile"]
+           [--cross ANOTHER ...] [--repeat 3] [--args "--profile"]
 """
 
 from __future__ import annotations
 
 import argparse
 import os
+import statistics
 import sys
 import tempfile
 import time
@@ -42,6 +45,7 @@ def main() -> None:
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--single", default="cpu-small-pd-v2")
     ap.add_argument("--cross", action="append", default=[])
+    ap.add_argument("--repeat", type=int, default=3, help="interleaved rounds; each model's median counts")
     ap.add_argument("--args", default="", help="options added to every ranad denoise run (e.g. --profile)")
     a = ap.parse_args()
     width, height = (int(v) for v in a.size.lower().split("x"))
@@ -62,14 +66,21 @@ def main() -> None:
                       .replace("\n", "\n    "))
             return res
 
-        single = run(a.single, "single")
-        per = single["seconds"] / len(ORDER)
-        print(f"  single-frame {a.single}: {single['seconds']:7.1f} s ({per:.1f} s per frame), "
-              f"peak {single['peak_mb']:.0f} MB")
-        for k, model in enumerate(crosses):
-            r = run(model, f"cross{k}")
-            print(f"  cross-frame {model}: {r['seconds']:7.1f} s ({r['seconds'] / len(ORDER):.1f} s per frame, "
-                  f"{r['seconds'] / single['seconds']:.2f}x single-frame), peak {r['peak_mb']:.0f} MB")
+        models = [(a.single, "single")] + [(m, f"cross{k}") for k, m in enumerate(crosses)]
+        runs = {tag: [] for _, tag in models}
+        for _ in range(max(1, a.repeat)):
+            for model, tag in models:
+                runs[tag].append(run(model, tag))
+        seconds = {tag: statistics.median(r["seconds"] for r in rs) for tag, rs in runs.items()}
+        peak = {tag: max(r["peak_mb"] for r in rs) for tag, rs in runs.items()}
+        each = lambda tag: " / ".join(f"{r['seconds']:.1f}" for r in runs[tag])  # noqa: E731
+        single = seconds["single"]
+        print(f"  single-frame {a.single}: median {single:7.1f} s ({single / len(ORDER):.1f} s per frame; runs "
+              f"{each('single')} s), peak {peak['single']:.0f} MB")
+        for model, tag in models[1:]:
+            s = seconds[tag]
+            print(f"  cross-frame {model}: median {s:7.1f} s ({s / len(ORDER):.1f} s per frame, {s / single:.2f}x "
+                  f"single-frame; runs {each(tag)} s), peak {peak[tag]:.0f} MB")
 
 
 if __name__ == "__main__":
