@@ -46,6 +46,10 @@ class ModelConfig:
     # bin dropout on a quincunx pyramid (layers.bin_dropout): every down-sampling level keeps half the bins, single-bin
     # pixels included; False (the first models) empties the second level of single-bin pixels
     dropout_lattice: bool = False
+    # reconstruction kernels with a learned range term per head: -lambda |prior(query pixel) - noisy flat(key
+    # pixel)|^2 added to the logits (reconstruction.KernelAttention), so the kernels can pick the noisy neighbours
+    # that agree with OIDN's flat estimate while the output stays a combination of noisy values; lambda starts at 0
+    prior_range: bool = False
 
     def to_dict(self) -> dict:
         d = asdict(self)
@@ -129,6 +133,12 @@ CONFIGS["cpu-small-pd-xg"] = ModelConfig(**{**CONFIGS["cpu-small-pd-xm"].__dict_
 # most of a frame, the coarsest level has bins to attend to (issue 24)
 CONFIGS["cpu-small-pdl"] = ModelConfig(**{**CONFIGS["cpu-small-pd"].__dict__, "name": "cpu-small-pdl",
                                          "dropout_lattice": True})
+
+
+# cpu-small-pd with the prior-range term in its reconstruction kernels; starts from cpu-small-pd weights exactly
+# (every range weight 0) (issue 24: the glass scenes, whose single-bin colour the guides do not explain)
+CONFIGS["cpu-small-pdr"] = ModelConfig(**{**CONFIGS["cpu-small-pd"].__dict__, "name": "cpu-small-pdr",
+                                         "prior_range": True})
 
 
 # the sequence model on cpu-small-pdl: cpu-small-pd-xg's temporal step over the lattice-dropout spatial model

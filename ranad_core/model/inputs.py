@@ -57,6 +57,9 @@ class ModelInputs:
 
 
 FEATURE_SETS = ("log1p", "prior")
+# first column of the "prior" set's six (PRIOR, FLAT_NOISY), after radiance (2 x 3), alpha, coverage, depth and
+# the guides (2 x 3)
+PRIOR_AT = 2 * 3 + 2 + 1 + 3 + 3
 
 
 # columns of prepare()'s features that describe what a bin shows rather than its noise: standardised log depth,
@@ -90,10 +93,16 @@ def feature_dim(features: str = "log1p") -> int:
 def old_columns(old: str, new: str) -> list:
     """Where each feature column of set `old` sits in set `new` (the "prior" set inserts its 6 columns after the
     guides, before the position encodings): how a model of one set starts training with another's weights."""
-    head = 2 * 3 + 2 + 1 + 3 + 3
+    head = PRIOR_AT
     idx = list(range(feature_dim(old)))
     shift = feature_dim(new) - feature_dim(old)
     return [i if i < head else i + shift for i in idx]
+
+
+def prior_guides(features: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """([N, 3] the flat prior, [N, 3] the pixel's flattened noisy beauty) of "prior" features, as `prepare` puts
+    them (log1p of the exposure-normalised colour): what a prior-range reconstruction compares."""
+    return features[:, PRIOR_AT:PRIOR_AT + 3], features[:, PRIOR_AT + 3:PRIOR_AT + 6]
 
 
 def _cols(img: DeepImage, names) -> np.ndarray:

@@ -12,10 +12,11 @@ from torch import nn
 from . import fused
 from .backbone import MultiUNet
 from .config import ModelConfig
-from .inputs import ModelInputs
+from .inputs import ModelInputs, prior_guides
 from .reconstruction import Reconstruction, demodulated
 
-DEMODULATED = ("diffuse",)   # the layers a demodulating model divides by the albedo (inputs.modulation)
+DEMODULATED = ("diffuse",)
+RANGE_LR_SCALE = 10.0        # lr_scale of the prior-range weights (ModelConfig.prior_range)   # the layers a demodulating model divides by the albedo (inputs.modulation)
 
 
 class RaNAD(nn.Module):
@@ -27,8 +28,14 @@ class RaNAD(nn.Module):
         self.backbone = MultiUNet(c.dim, c.unets, c.levels, c.blocks_per_level, c.heads, c.head_dim, c.radius,
                                   c.radius_growth, backend, c.dropout_lattice)
         self.recon = nn.ModuleDict({name: Reconstruction(c.dim, r.scales, r.heads, r.head_dim, r.radius,
-                                                         r.radius_growth, backend, c.dropout_lattice)
+                                                         r.radius_growth, backend, c.dropout_lattice,
+                                                         c.prior_range)
                                     for name, r in c.recon.items()})
+
+    def lr_scale(self, name: str) -> float:
+        """Learning-rate multiplier of parameter `name` (trainer.param_groups): the prior-range weights start at 0
+        and are single numbers per head, which at the base rate would barely move in a fine-tune."""
+        return RANGE_LR_SCALE if name.endswith(".range") else 1.0
 
     def embeddings(self, inputs: ModelInputs) -> torch.Tensor:
         """The backbone's per-bin embeddings (what the AOV reuse caches)."""
@@ -45,7 +52,12 @@ class RaNAD(nn.Module):
     def reconstruct_layer(self, name: str, emb: torch.Tensor, inputs: ModelInputs, values: torch.Tensor):
         """Layer `name`'s reconstruction of `values` ([N, C], the noisy layer or AOVs batched) with embeddings
         `emb`: the one way every caller (denoise, AOVs, training) applies a reconstruction module."""
-        return demodulated(self.recon[name], emb, inputs.layout, values, self.modulation(name, inputs))
+        guide = None
+        if self.config.prior_range:
+            if inputs.features is None:
+                raise ValueError("a prior-range model's reconstruction needs the inputs' features")
+            guide = prior_guides(inputs.features)
+        return demodulated(self.recon[name], emb, inputs.layout, values, self.modulation(name, inputs), guide)
 
     def reconstruct(self, emb: torch.Tensor, inputs: ModelInputs) -> dict:
         """Denoised layers: name -> [N, C] for every configured layer the inputs carry."""

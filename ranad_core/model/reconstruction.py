@@ -15,6 +15,8 @@ combination of them.
 
 from __future__ import annotations
 
+import math
+
 import torch
 from torch import nn
 
@@ -27,7 +29,8 @@ class KernelAttention(nn.Module):
     """Single-purpose RaNA whose values are the noisy layer itself (no value projection): the kernel weights
     come from the embeddings, the values pass through untouched, which is what keeps the output linear."""
 
-    def __init__(self, dim: int, heads: int, head_dim: int, radius: float, backend: str = "auto"):
+    def __init__(self, dim: int, heads: int, head_dim: int, radius: float, backend: str = "auto",
+                 prior_range: bool = False):
         super().__init__()
         from ..rana import disc
 
@@ -36,24 +39,49 @@ class KernelAttention(nn.Module):
         self.k = nn.Linear(dim, heads * head_dim)
         self.bias = nn.Parameter(torch.zeros(heads, disc(radius).side, disc(radius).side))
         self.head_mix = nn.Parameter(torch.zeros(heads))  # softmax over heads: a convex mix of head kernels
+        # per head, lambda of the range term -lambda |a_q - b_k|^2 (ModelConfig.prior_range); 0: no effect
+        self.range = nn.Parameter(torch.zeros(heads)) if prior_range else None
 
-    def forward(self, q_feat, k_feat, q_pixels, keys: Layout, values: torch.Tensor) -> torch.Tensor:
-        """values [Nk, C] -> [Nq, C]: each head's kernel applied to all C value channels, heads mixed convexly."""
+    def forward(self, q_feat, k_feat, q_pixels, keys: Layout, values: torch.Tensor, guide=None) -> torch.Tensor:
+        """values [Nk, C] -> [Nq, C]: each head's kernel applied to all C value channels, heads mixed convexly.
+        `guide`: (a [Nq, 3], b [Nk, 3]) for a prior-range module (the query's flat prior, the key's noisy flat)."""
         H, d = self.heads, self.head_dim
         if fused.active(q_feat, self.backend):
-            return self._fused_forward(q_feat, k_feat, q_pixels, keys, values)
+            return self._fused_forward(q_feat, k_feat, q_pixels, keys, values, guide)
         q = self.q(q_feat).view(q_feat.shape[0], d, H).transpose(1, 2)   # channel-major, as the kernels stream it
         k = self.k(k_feat).view(k_feat.shape[0], d, H).transpose(1, 2)
+        q, k = self._with_range(q, k, guide)
         v = values.unsqueeze(1).expand(-1, H, -1)
         y = rana(q, k, v, q_pixels, keys.offsets, keys.size, self.radius, self.bias, backend=self.backend)
         return (y * torch.softmax(self.head_mix, 0)[None, :, None]).sum(1)
 
-    def _fused_forward(self, q_feat, k_feat, q_pixels, keys: Layout, values: torch.Tensor) -> torch.Tensor:
+    def _with_range(self, q: torch.Tensor, k: torch.Tensor, guide) -> tuple[torch.Tensor, torch.Tensor]:
+        """q [Nq, H, d], k [Nk, H, d] extended so that the op's q'.k' / sqrt(d') is q.k / sqrt(d) - lambda_h
+        |a - b|^2 + (a term of the query alone, which the softmax ignores): q' = sqrt(d') [q / sqrt(d), 2 lambda
+        a, -lambda, 0...], k' = [k, b, |b|^2, 0...], d' the next head size the kernels compile (16 for d = 8)."""
+        if self.range is None:
+            return q, k
+        if guide is None:
+            raise ValueError("a prior-range reconstruction needs the prior guides (prior features)")
+        a, b = guide
+        nq, nk, H, d = q.shape[0], k.shape[0], self.heads, self.head_dim
+        wide = next(w for w in (8, 16, 32, 64, 128) if w >= d + 4)
+        s = math.sqrt(wide)
+        lam = self.range[None, :, None]
+        qa = torch.cat([q * (s / math.sqrt(d)), (2 * s) * lam * a[:, None, :], (-s * lam).expand(nq, H, 1),
+                        q.new_zeros(nq, H, wide - d - 4)], 2)
+        ka = torch.cat([k, b[:, None, :].expand(nk, H, 3), (b * b).sum(1)[:, None, None].expand(nk, H, 1),
+                        k.new_zeros(nk, H, wide - d - 4)], 2)
+        return qa, ka
+
+    def _fused_forward(self, q_feat, k_feat, q_pixels, keys: Layout, values: torch.Tensor, guide=None
+                       ) -> torch.Tensor:
         """forward for inference: q and k from the fused projection, v made channel-major (the layout the kernels
         stream), so the op copies no operand."""
         H, d = self.heads, self.head_dim
         (q,), (k,) = fused.ln_linear(q_feat, None, [self.q]), fused.ln_linear(k_feat, None, [self.k])
         q, k = (x.view(len(x), d, H).transpose(1, 2) for x in (q, k))
+        q, k = self._with_range(q, k, guide)
         v = values[:, :, None].expand(-1, -1, H).contiguous().transpose(1, 2)   # channel-major [N, H, C]
         y = rana(q, k, v, q_pixels, keys.offsets, keys.size, self.radius, self.bias, backend=self.backend)
         mix = torch.softmax(self.head_mix, 0)
@@ -67,37 +95,45 @@ class Reconstruction(nn.Module):
     """One output layer's reconstruction module (number of scales, radii and dropout pattern per layer)."""
 
     def __init__(self, dim: int, scales: int = 3, heads: int = 2, head_dim: int = 8, radius: float = 2.5,
-                 radius_growth: float = 1.0, backend: str = "auto", lattice: bool = False):
+                 radius_growth: float = 1.0, backend: str = "auto", lattice: bool = False, prior_range: bool = False):
         super().__init__()
         self.scales, self.lattice = scales, lattice
         radii = [radius + radius_growth * s for s in range(scales)]
-        self.down = nn.ModuleList(KernelAttention(dim, heads, head_dim, radii[s], backend) for s in range(scales - 1))
-        self.per_scale = nn.ModuleList(KernelAttention(dim, heads, head_dim, radii[s], backend) for s in range(scales))
+        self.down = nn.ModuleList(KernelAttention(dim, heads, head_dim, radii[s], backend, prior_range)
+                                  for s in range(scales - 1))
+        self.per_scale = nn.ModuleList(KernelAttention(dim, heads, head_dim, radii[s], backend, prior_range)
+                                       for s in range(scales))
         self.mixer = nn.Linear(dim, scales)
 
-    def forward(self, feat: torch.Tensor, layout: Layout, noisy: torch.Tensor) -> torch.Tensor:
-        """feat [N, dim] backbone embeddings, noisy [N, C] layer values (any C: AOVs batch here) -> [N, C]."""
+    def forward(self, feat: torch.Tensor, layout: Layout, noisy: torch.Tensor, guide=None) -> torch.Tensor:
+        """feat [N, dim] backbone embeddings, noisy [N, C] layer values (any C: AOVs batch here) -> [N, C].
+        `guide`: (prior [N, 3], noisy flat [N, 3]) per bin, for prior-range modules (inputs.prior_guides)."""
         feats, layouts, images = [feat], [layout], [noisy]
+        guides = [guide]
         for s in range(self.scales - 1):  # stage 1: the pyramid of blurred layers
             kept, coarse = bin_dropout(layouts[-1], s % 2, s + 1, self.lattice)
             q_feat = feats[-1][kept]
-            images.append(self.down[s](q_feat, feats[-1], coarse.pixels, layouts[-1], images[-1]))
+            g = guides[-1]
+            images.append(self.down[s](q_feat, feats[-1], coarse.pixels, layouts[-1], images[-1],
+                                       None if g is None else (g[0][kept], g[1])))
             feats.append(q_feat)
             layouts.append(coarse)
-        outs = [self.per_scale[s](feat, feats[s], layout.pixels, layouts[s], images[s])  # stage 2
+            guides.append(None if g is None else (g[0][kept], g[1][kept]))
+        outs = [self.per_scale[s](feat, feats[s], layout.pixels, layouts[s], images[s],
+                                  None if guide is None else (guide[0], guides[s][1]))  # stage 2
                 for s in range(self.scales)]
         w = torch.softmax(self.mixer(feat), dim=1)  # stage 3: per-bin convex mix of the scales
         return sum(w[:, s:s + 1] * outs[s] for s in range(self.scales))
 
 
 def demodulated(rec: Reconstruction, feat: torch.Tensor, layout: Layout, values: torch.Tensor,
-                modulation: torch.Tensor | None) -> torch.Tensor:
+                modulation: torch.Tensor | None, guide=None) -> torch.Tensor:
     """rec on values / modulation, times the modulation: values [N, 3k] (k RGB triplets, e.g. AOVs batched),
-    modulation [N, 3] or None (then rec alone)."""
+    modulation [N, 3] or None (then rec alone); `guide`: Reconstruction.forward's."""
     if modulation is None:
-        return rec(feat, layout, values)
+        return rec(feat, layout, values, guide)
     m = per_channel(modulation, values)
-    return m * rec(feat, layout, values / m)
+    return m * rec(feat, layout, values / m, guide)
 
 
 def per_channel(modulation: torch.Tensor, values: torch.Tensor) -> torch.Tensor:
