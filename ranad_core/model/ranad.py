@@ -15,8 +15,8 @@ from .config import ModelConfig
 from .inputs import ModelInputs, prior_guides
 from .reconstruction import Reconstruction, demodulated
 
-DEMODULATED = ("diffuse",)
-RANGE_LR_SCALE = 10.0        # lr_scale of the prior-range weights (ModelConfig.prior_range)   # the layers a demodulating model divides by the albedo (inputs.modulation)
+DEMODULATED = ("diffuse",)   # the layers a demodulating model divides by the albedo (inputs.modulation)
+RANGE_LR_SCALE = 10.0        # lr_scale of the prior-range weights (ModelConfig.prior_range)
 
 
 class RaNAD(nn.Module):
