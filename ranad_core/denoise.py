@@ -346,7 +346,7 @@ def _denoise_window(model, images, centre, mapping, tile, halo, keep_noisy, want
         out = _assemble(img, mapping, c.srt, c.perm, outs, keep_noisy) if n else img
     if want_embeddings:
         def width(f):
-            return model.embedding_width(f == centre, len(frames)) if cross else model.config.dim
+            return model.embedding_width(f == centre, len(frames)) if cross else model.embedding_width()
 
         embs = [e if e is not None else np.zeros((fr.srt.num_bins, width(f)), np.float16)
                 for f, (e, fr) in enumerate(zip(embs, frames))]

@@ -62,8 +62,12 @@ def models():
     guarded = CrossFrameRaNAD.from_single(demod, demodulating(matching_config(guard=True)), feature_dim()).eval()
     for t in guarded.temporal.values():         # spread the matching step's weights over the candidates
         torch.nn.init.constant_(t.self_bonus, 0.0)
+    ranged = RaNAD(get_config("cpu-small-pdr"), feature_dim("prior")).eval()
+    for name, p in ranged.named_parameters():   # the prior-range term switched on, so the test covers it
+        if name.endswith(".range"):
+            torch.nn.init.constant_(p, 1.0)
     return {"single": single, "cross": cross, "output-mix": mixed, "input-keys": keyed, "demodulated": demod,
-            "demodulated-input-keys": demod_keyed, "guarded-matching": guarded}
+            "demodulated-input-keys": demod_keyed, "guarded-matching": guarded, "prior-range": ranged}
 
 
 def test_layers_and_rules():
@@ -75,7 +79,7 @@ def test_layers_and_rules():
 
 
 @pytest.mark.parametrize("kind", ["single", "cross", "output-mix", "input-keys", "demodulated",
-                                  "demodulated-input-keys", "guarded-matching"])
+                                  "demodulated-input-keys", "guarded-matching", "prior-range"])
 def test_light_groups_sum_to_the_denoised_beauty(kind):
     model = models()[kind]
     frames = [exact_groups(read_deep(SHOT / f"noisy_spp16.{i:04d}.exr")) for i in range(3)]
@@ -136,6 +140,12 @@ def test_aov_command_through_the_cache_of_a_guarded_matching_model(tmp_path):
     """The matching step with its guard: the guides travel in the cached embeddings, so `ranad aov` rebuilds the
     same allowed pairs and the light groups still sum to the denoised beauty."""
     denoise_then_aov(models()["guarded-matching"], tmp_path)
+
+
+def test_aov_command_through_the_cache_of_a_prior_range_model(tmp_path):
+    """The prior-range reconstruction: the prior guides travel in the cached embeddings, so `ranad aov` gives the
+    kernels the same range term and the light groups still sum to the denoised beauty."""
+    denoise_then_aov(models()["prior-range"], tmp_path)
 
 
 def test_aov_command_through_the_cache_and_refusals(tmp_path):

@@ -53,18 +53,22 @@ def test_prior_range_model_starts_as_its_init_and_stays_linear():
     assert result.missing_keys and all(k.endswith(".range") for k in result.missing_keys)
     inputs = _inputs()
     with torch.no_grad():
-        emb = plain.embeddings(inputs)
+        emb, emb_r = plain.embeddings(inputs), ranged.embeddings(inputs)
+        # the guides ride behind the embeddings (what the AOV cache keeps)
+        assert emb_r.shape[1] == ranged.embedding_width() == emb.shape[1] + 6
+        torch.testing.assert_close(emb_r[:, :emb.shape[1]], emb)
+        torch.testing.assert_close(emb_r[:, emb.shape[1]:], inputs.features[:, PRIOR_AT:PRIOR_AT + 6])
         for name in ("diffuse", "alpha"):
-            torch.testing.assert_close(ranged.reconstruct_layer(name, emb, inputs, inputs.layers[name]),
+            torch.testing.assert_close(ranged.reconstruct_layer(name, emb_r, inputs, inputs.layers[name]),
                                        plain.reconstruct_layer(name, emb, inputs, inputs.layers[name]),
                                        rtol=1e-5, atol=1e-6)
         for m in ranged.modules():
             if isinstance(m, KernelAttention):
                 m.range.fill_(2.0)
         x, y = (torch.rand(inputs.layout.bins, 6, generator=torch.Generator().manual_seed(s)) for s in (3, 4))
-        r = lambda v: ranged.reconstruct_layer("diffuse", emb, inputs, v)  # noqa: E731
+        r = lambda v: ranged.reconstruct_layer("diffuse", emb_r, inputs, v)  # noqa: E731
         torch.testing.assert_close(r(2 * x - 3 * y), 2 * r(x) - 3 * r(y), rtol=1e-4, atol=1e-5)
-        moved = ranged.reconstruct_layer("specular", emb, inputs, inputs.layers["specular"])
+        moved = ranged.reconstruct_layer("specular", emb_r, inputs, inputs.layers["specular"])
         same = plain.reconstruct_layer("specular", emb, inputs, inputs.layers["specular"])
         assert float((moved - same).abs().max()) > 1e-3                   # the term does something
 

@@ -38,8 +38,16 @@ class RaNAD(nn.Module):
         return RANGE_LR_SCALE if name.endswith(".range") else 1.0
 
     def embeddings(self, inputs: ModelInputs) -> torch.Tensor:
-        """The backbone's per-bin embeddings (what the AOV reuse caches)."""
-        return self.backbone(self.embed_features(inputs.features), inputs.layout)
+        """The backbone's per-bin embeddings (what the AOV reuse caches); a prior-range model's carry the bins' six
+        prior guides behind them (inputs.prior_guides), so the cached kernels of `ranad aov` have them too."""
+        emb = self.backbone(self.embed_features(inputs.features), inputs.layout)
+        if self.config.prior_range:
+            emb = torch.cat([emb, *prior_guides(inputs.features)], 1)
+        return emb
+
+    def embedding_width(self) -> int:
+        """Width of `embeddings`' rows."""
+        return self.config.dim + (6 if self.config.prior_range else 0)
 
     def embed_features(self, x: torch.Tensor) -> torch.Tensor:
         """The input embedding of features [N, F] (the fused inference path where it applies, fused.py)."""
@@ -53,10 +61,9 @@ class RaNAD(nn.Module):
         """Layer `name`'s reconstruction of `values` ([N, C], the noisy layer or AOVs batched) with embeddings
         `emb`: the one way every caller (denoise, AOVs, training) applies a reconstruction module."""
         guide = None
-        if self.config.prior_range:
-            if inputs.features is None:
-                raise ValueError("a prior-range model's reconstruction needs the inputs' features")
-            guide = prior_guides(inputs.features)
+        if self.config.prior_range:   # the guides ride behind the embeddings (see embeddings)
+            d = self.config.dim
+            emb, guide = emb[:, :d], (emb[:, d:d + 3], emb[:, d + 3:d + 6])
         return demodulated(self.recon[name], emb, inputs.layout, values, self.modulation(name, inputs), guide)
 
     def reconstruct(self, emb: torch.Tensor, inputs: ModelInputs) -> dict:
