@@ -60,6 +60,7 @@ FEATURE_SETS = ("log1p", "prior")
 # first column of the "prior" set's six (PRIOR, FLAT_NOISY), after radiance (2 x 3), alpha, coverage, depth and
 # the guides (2 x 3)
 PRIOR_AT = 2 * 3 + 2 + 1 + 3 + 3
+PRIOR_GUIDES_WIDTH = 6   # those six columns: what prior_guides returns, two RGB triplets
 
 
 # columns of prepare()'s features that describe what a bin shows rather than its noise: standardised log depth,
@@ -102,7 +103,8 @@ def old_columns(old: str, new: str) -> list:
 def prior_guides(features: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
     """([N, 3] the flat prior, [N, 3] the pixel's flattened noisy beauty) of "prior" features, as `prepare` puts
     them (log1p of the exposure-normalised colour): what a prior-range reconstruction compares."""
-    return features[:, PRIOR_AT:PRIOR_AT + 3], features[:, PRIOR_AT + 3:PRIOR_AT + 6]
+    prior, flat = features[:, PRIOR_AT:PRIOR_AT + PRIOR_GUIDES_WIDTH].split(3, 1)
+    return prior, flat
 
 
 def _cols(img: DeepImage, names) -> np.ndarray:

@@ -12,7 +12,7 @@ from torch import nn
 from . import fused
 from .backbone import MultiUNet
 from .config import ModelConfig
-from .inputs import ModelInputs, prior_guides
+from .inputs import PRIOR_GUIDES_WIDTH, ModelInputs, prior_guides
 from .reconstruction import Reconstruction, demodulated
 
 DEMODULATED = ("diffuse",)   # the layers a demodulating model divides by the albedo (inputs.modulation)
@@ -47,7 +47,7 @@ class RaNAD(nn.Module):
 
     def embedding_width(self) -> int:
         """Width of `embeddings`' rows."""
-        return self.config.dim + (6 if self.config.prior_range else 0)
+        return self.config.dim + (PRIOR_GUIDES_WIDTH if self.config.prior_range else 0)
 
     def embed_features(self, x: torch.Tensor) -> torch.Tensor:
         """The input embedding of features [N, F] (the fused inference path where it applies, fused.py)."""
@@ -62,8 +62,7 @@ class RaNAD(nn.Module):
         `emb`: the one way every caller (denoise, AOVs, training) applies a reconstruction module."""
         guide = None
         if self.config.prior_range:   # the guides ride behind the embeddings (see embeddings)
-            d = self.config.dim
-            emb, guide = emb[:, :d], (emb[:, d:d + 3], emb[:, d + 3:d + 6])
+            emb, guide = emb[:, :self.config.dim], tuple(emb[:, self.config.dim:].split(3, 1))
         return demodulated(self.recon[name], emb, inputs.layout, values, self.modulation(name, inputs), guide)
 
     def reconstruct(self, emb: torch.Tensor, inputs: ModelInputs) -> dict:

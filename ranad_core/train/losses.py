@@ -76,7 +76,8 @@ def total_loss(pred: dict, ref: dict, offsets: torch.Tensor, size: tuple[int, in
     parts = {"diffuse": smape(pred["diffuse"], ref["diffuse"]), "specular": smape(pred["specular"], ref["specular"]),
              "alpha": (pred["alpha"] - ref["alpha"]).abs().mean(),
              "depth": ((pred["depth"] - ref["depth"]).abs() / (ref["depth"].abs() + 1e-3)).mean()}
-    img = lambda x: tonemap(x / scale).T.reshape(3, h, w)  # noqa: E731
+    shaped = lambda x: tonemap(x).T.reshape(3, h, w)  # noqa: E731
+    img = lambda x: shaped(x / scale)  # noqa: E731
     structure = h >= 4 and w >= 4                             # SSIM needs its window
     wants = {k: weights[k] > 0 and (structure or not k.endswith("ssim"))
              for k in ("separation", "separation_ssim", "edit", "edit_ssim")}
@@ -92,7 +93,7 @@ def total_loss(pred: dict, ref: dict, offsets: torch.Tensor, size: tuple[int, in
             if wants["edit"]:
                 parts["edit"] = smape(ep, er)
             if wants["edit_ssim"]:
-                parts["edit_ssim"] = 1 - ssim(img(ep * scale), img(er * scale))
+                parts["edit_ssim"] = 1 - ssim(shaped(ep), shaped(er))   # edit_image divided by scale already
     cp, cr = composite(pred, offsets), composite(ref, offsets)
     parts["composite"] = smape(cp, cr)
     if structure:
