@@ -27,13 +27,23 @@ def _composite(img: DeepImage, names, premultiplied: bool) -> np.ndarray:
 
 def composite_columns(img: DeepImage, cols: np.ndarray, premultiplied: bool) -> np.ndarray:
     """`_composite` of per-bin columns [N, C] given as an array rather than channel names."""
+    return composite_groups(img, [(cols, premultiplied)])[0]
+
+
+def composite_groups(img: DeepImage, groups: list) -> list:
+    """composite_columns of several (cols [N, C_i], premultiplied) groups in one pass over the bins: the
+    transmittance, most of a composite's cost, is computed once for all of them."""
     a = img.channel(ALPHA)[:, None]
-    vals = cols if premultiplied else cols * a
-    out = flatten_torch(torch.from_numpy(np.concatenate([vals, a], 1).astype(np.float32)),
-                        torch.from_numpy(img.offsets), cols.shape[1]).numpy()
-    if premultiplied:
-        return out[:, :-1]
-    return out[:, :-1] / np.maximum(out[:, -1:], EPS)
+    vals = [cols if premultiplied else cols * a for cols, premultiplied in groups]
+    width = sum(v.shape[1] for v in vals)
+    out = flatten_torch(torch.from_numpy(np.concatenate([*vals, a], 1).astype(np.float32)),
+                        torch.from_numpy(img.offsets), width).numpy()
+    res, at = [], 0
+    for cols, premultiplied in groups:
+        part = out[:, at:at + cols.shape[1]]
+        at += cols.shape[1]
+        res.append(part if premultiplied else part / np.maximum(out[:, -1:], EPS))
+    return res
 
 
 def oidn_flat(noisy: DeepImage) -> np.ndarray:

@@ -183,6 +183,9 @@ class DeepImage:
         z = self.values[:, zi]
         zb = z if zbi is None else self.values[:, zbi]
         perm = _sort_bins(self.pixel_index(), z, zb)
+        if np.array_equal(perm, np.arange(perm.size)):   # already sorted (most renderers' files): a plain copy
+            return replace(self, values=self.values.copy(), ids={k: v.copy() for k, v in self.ids.items()},
+                           channel_types=dict(self.channel_types), header=dict(self.header)), perm
         return gather_bins(self, perm, self.offsets), perm
 
     def measured_state(self) -> str:
@@ -475,6 +478,8 @@ def unsort(values: Any, perm: np.ndarray) -> Any:
     """Put per-bin ``values`` (numpy array or torch tensor, bins on axis 0) of a sorted image back in the
     order of the image :meth:`DeepImage.sorted` was called on: ``unsort(img.sorted()[0].values, perm)``
     equals ``img.values``. Works on torch tensors (differentiably) as well as numpy arrays."""
+    if np.array_equal(perm, np.arange(len(perm))):   # the image was sorted already: the order is the file's
+        return values.copy() if isinstance(values, np.ndarray) else values.clone()
     inv = inverse_permutation(perm)
     if isinstance(values, np.ndarray):
         return values[inv]

@@ -21,7 +21,7 @@ import warnings
 import numpy as np
 
 from ..channels import ALBEDO, DIFFUSE, EMISSION, FLAT_NOISY, NORMAL, PRIOR, PRIOR_NOAUX, RGB, SPECULAR
-from ..baselines import composite_columns
+from ..baselines import composite_groups
 from ..deep import DeepImage
 from ..errors import RanadError
 
@@ -97,15 +97,18 @@ def flat_images(srt: DeepImage, rgb: np.ndarray, guides: bool) -> tuple[np.ndarr
     """(noisy flattened beauty [P, 3], OIDN's denoised one [P, 3]) of a sorted image with per-bin beauty `rgb`.
     OIDN sees the colour divided by the frame's exposure scale (so its output, too, scales with the input)."""
     h, w = srt.height, srt.width
-    flat = composite_columns(srt, np.maximum(np.nan_to_num(rgb, nan=0.0, posinf=0.0), 0), True)
+    groups = [(np.maximum(np.nan_to_num(rgb, nan=0.0, posinf=0.0), 0), True)]
+    aux = guides and all(c in srt.channels for names in AUX for c in names)
+    if aux:
+        groups += [(np.stack([srt.channel(c) for c in names], 1), False) for names in AUX]
+    flat, *flat_aux = composite_groups(srt, groups)
     if srt.num_bins == 0 or h * w == 0:
         return flat, flat.copy()
     s = exposure_scale(flat)
     img = lambda x: np.ascontiguousarray(x.reshape(h, w, 3), np.float32)  # noqa: E731
     albedo = normal = None
-    if guides and all(c in srt.channels for names in AUX for c in names):
-        albedo = img(np.clip(composite_columns(srt, np.stack([srt.channel(c) for c in AUX[0]], 1), False), 0, 1))
-        normal = img(np.clip(composite_columns(srt, np.stack([srt.channel(c) for c in AUX[1]], 1), False), -1, 1))
+    if aux:
+        albedo, normal = img(np.clip(flat_aux[0], 0, 1)), img(np.clip(flat_aux[1], -1, 1))
     den = _oidn(img(flat / s), albedo, normal).reshape(-1, 3) * s
     return flat, np.maximum(np.nan_to_num(den, nan=0.0, posinf=0.0), 0)
 
