@@ -50,6 +50,10 @@ class ModelConfig:
     # pixel)|^2 added to the logits (reconstruction.KernelAttention), so the kernels can pick the noisy neighbours
     # that agree with OIDN's flat estimate while the output stays a combination of noisy values; lambda starts at 0
     prior_range: bool = False
+    # alpha's reconstruction plus a learned per-bin correction from the bin's embedding (Reconstruction.residual),
+    # zero at start: deep-Z bins made of few samples carry an alpha biased high behind the first bin (a bin exists
+    # only where a sample stopped), shared by all neighbours, so no kernel removes it (runs/edit-oracles-s12)
+    alpha_residual: bool = False
 
     def to_dict(self) -> dict:
         d = asdict(self)
@@ -139,6 +143,11 @@ CONFIGS["cpu-small-pdl"] = ModelConfig(**{**CONFIGS["cpu-small-pd"].__dict__, "n
 # (every range weight 0) (issue 24: the glass scenes, whose single-bin colour the guides do not explain)
 CONFIGS["cpu-small-pdr"] = ModelConfig(**{**CONFIGS["cpu-small-pd"].__dict__, "name": "cpu-small-pdr",
                                          "prior_range": True})
+
+
+# cpu-small-pd with the alpha residual (ModelConfig.alpha_residual); starts from cpu-small-pd weights exactly
+CONFIGS["cpu-small-pda"] = ModelConfig(**{**CONFIGS["cpu-small-pd"].__dict__, "name": "cpu-small-pda",
+                                         "alpha_residual": True})
 
 
 # the sequence model on cpu-small-pdl: cpu-small-pd-xg's temporal step over the lattice-dropout spatial model

@@ -87,8 +87,9 @@ class TemporalMix(nn.Module):
 class CrossFrameRaNAD(nn.Module):
     def __init__(self, config: ModelConfig, in_dim: int, backend: str = "auto"):
         super().__init__()
-        if config.prior_range:
-            raise ValueError(f"config {config.name!r}: the prior-range reconstruction has no cross-frame model yet")
+        if config.prior_range or config.alpha_residual:
+            raise ValueError(f"config {config.name!r}: the prior-range and alpha-residual reconstructions have no "
+                             f"cross-frame model yet")
         self.config = config
         self.single = RaNAD(config, in_dim + FRAME_FEATURES, backend)
         c = config

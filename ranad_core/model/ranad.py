@@ -29,7 +29,7 @@ class RaNAD(nn.Module):
                                   c.radius_growth, backend, c.dropout_lattice)
         self.recon = nn.ModuleDict({name: Reconstruction(c.dim, r.scales, r.heads, r.head_dim, r.radius,
                                                          r.radius_growth, backend, c.dropout_lattice,
-                                                         c.prior_range)
+                                                         c.prior_range, c.alpha_residual and name == "alpha")
                                     for name, r in c.recon.items()})
 
     def lr_scale(self, name: str) -> float:

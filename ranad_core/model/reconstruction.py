@@ -92,11 +92,22 @@ class KernelAttention(nn.Module):
 
 
 class Reconstruction(nn.Module):
-    """One output layer's reconstruction module (number of scales, radii and dropout pattern per layer)."""
+    """One output layer's reconstruction module (number of scales, radii and dropout pattern per layer).
+
+    `residual` (ModelConfig.alpha_residual, alpha's module only): the kernels' result plus a per-bin correction, a
+    small MLP of the bin's embedding whose last layer starts at zero (the module begins as the plain one). The one
+    output that is not a combination of the noisy values: it can move a bin's alpha where all its neighbours are
+    off the same way, which no kernel can (runs/edit-oracles-s12). Only for a layer that carries no AOVs."""
 
     def __init__(self, dim: int, scales: int = 3, heads: int = 2, head_dim: int = 8, radius: float = 2.5,
-                 radius_growth: float = 1.0, backend: str = "auto", lattice: bool = False, prior_range: bool = False):
+                 radius_growth: float = 1.0, backend: str = "auto", lattice: bool = False, prior_range: bool = False,
+                 residual: bool = False):
         super().__init__()
+        self.residual = None
+        if residual:
+            self.residual = nn.Sequential(nn.Linear(dim, dim), nn.ReLU(), nn.Linear(dim, 1))
+            nn.init.zeros_(self.residual[2].weight)
+            nn.init.zeros_(self.residual[2].bias)
         self.scales, self.lattice = scales, lattice
         radii = [radius + radius_growth * s for s in range(scales)]
         self.down = nn.ModuleList(KernelAttention(dim, heads, head_dim, radii[s], backend, prior_range)
@@ -123,7 +134,12 @@ class Reconstruction(nn.Module):
                                   None if guide is None else (guide[0], guides[s][1]))  # stage 2
                 for s in range(self.scales)]
         w = torch.softmax(self.mixer(feat), dim=1)  # stage 3: per-bin convex mix of the scales
-        return sum(w[:, s:s + 1] * outs[s] for s in range(self.scales))
+        out = sum(w[:, s:s + 1] * outs[s] for s in range(self.scales))
+        if self.residual is not None:
+            if out.shape[1] != 1:
+                raise ValueError(f"a residual reconstruction has one channel (alpha), got values of {out.shape[1]}")
+            out = out + fused.relu_mlp(self.residual, feat)
+        return out
 
 
 def demodulated(rec: Reconstruction, feat: torch.Tensor, layout: Layout, values: torch.Tensor,
