@@ -127,9 +127,17 @@ def _bins_integral(offsets: np.ndarray, width: int, height: int) -> np.ndarray:
     return integral
 
 
+def _window_bins(integral: np.ndarray, width: int, height: int, tile: int, halo: int) -> np.ndarray:
+    """Bins of every haloed window of tile_windows(width, height, tile, halo), [rows of tiles, columns]."""
+    xs, ys = np.arange(0, width, tile), np.arange(0, height, tile)
+    x0, x1 = np.maximum(0, xs - halo), np.minimum(width, xs + tile + halo)     # x1, y1: one past the window
+    y0, y1 = np.maximum(0, ys - halo), np.minimum(height, ys + tile + halo)
+    return (integral[np.ix_(y1, x1)] - integral[np.ix_(y0, x1)] - integral[np.ix_(y1, x0)]
+            + integral[np.ix_(y0, x0)])
+
+
 def _worst_window(integral: np.ndarray, width: int, height: int, tile: int, halo: int) -> int:
-    return max(integral[y1 + 1, x1 + 1] - integral[y0, x1 + 1] - integral[y1 + 1, x0] + integral[y0, x0]
-               for _, (x0, y0, x1, y1) in tile_windows(width, height, tile, halo))
+    return int(_window_bins(integral, width, height, tile, halo).max())
 
 
 def tile_bytes(offsets: np.ndarray, width: int, height: int, tile: int, halo: int, frames: int = 1) -> float:
@@ -138,18 +146,38 @@ def tile_bytes(offsets: np.ndarray, width: int, height: int, tile: int, halo: in
         * frames
 
 
+# a tile's fixed cost, in bins' worth of model work (its gather, launches, scatter): among tilings that compute
+# nearly the same bins, the one with fewer tiles wins
+TILE_OVERHEAD_BINS = 20000
+
+
+def tile_candidates(width: int, height: int) -> list:
+    """Aligned tile sizes that split the width or the height into 1, 2, 3, ... nearly equal tiles, largest first."""
+    return sorted({ALIGN * math.ceil(math.ceil(n / k) / ALIGN) for n in (width, height)
+                   for k in range(1, math.ceil(n / ALIGN) + 1)}, reverse=True)
+
+
 def choose_tile(offsets: np.ndarray, width: int, height: int, halo: int, budget_bytes: float,
                 frames: int = 1) -> int:
-    """The largest aligned tile whose haloed windows all fit the memory budget (at least ALIGN, which the caller
-    checks against the budget with tile_bytes); `frames` windows of frames share the budget."""
+    """The aligned tile with the least work whose haloed windows all fit the memory budget: the fewest bins
+    computed (the halos overlap; a tiling whose last row or column is a sliver pays a whole halo for it) plus
+    TILE_OVERHEAD_BINS per tile, over tile_candidates. ALIGN when none fits (the caller checks that size against
+    the budget with tile_bytes); `frames` windows of frames share the budget."""
+    if width <= 0 or height <= 0:
+        return ALIGN
     integral = _bins_integral(offsets, width, height)
     limit = max(1, int(budget_bytes // (BYTES_PER_BIN * frames)))
-    tile = ALIGN * max(1, math.ceil(max(width, height) / ALIGN))
-    while tile > ALIGN:
-        if _worst_window(integral, width, height, tile, halo) <= limit:
-            return tile
-        tile = max(ALIGN, (tile // 2) // ALIGN * ALIGN)
-    return ALIGN
+    best = None
+    for tile in tile_candidates(width, height):
+        if best is not None and tile * 4 < best[1]:
+            break   # a quarter of the best size and below: only more halo
+        bins = _window_bins(integral, width, height, tile, halo)
+        if bins.max() > limit:
+            continue
+        cost = int(bins.sum()) + TILE_OVERHEAD_BINS * bins.size
+        if best is None or cost < best[0]:
+            best = (cost, tile)
+    return ALIGN if best is None else best[1]
 
 
 def _fix_nonfinite(img: DeepImage, depth=DEPTHS) -> tuple[DeepImage, int]:

@@ -212,3 +212,45 @@ def test_cache_is_written_and_refused_when_stale(tmp_path, model_file):
     (tmp_path / "bad.ranadcache").write_bytes(b"x" * 20)
     with pytest.raises(RanadError, match="not a ranad cache"):
         cache_io.read_cache(str(tmp_path / "bad.ranadcache"))
+
+
+def _haloed_bins_by_hand(counts: np.ndarray, tile: int, halo: int) -> list:
+    """Bins of each haloed window, counted from the per-pixel counts with plain slicing (no integral image)."""
+    from ranad_core.denoise import tile_windows
+
+    h, w = counts.shape
+    return [int(counts[y0:y1 + 1, x0:x1 + 1].sum()) for _, (x0, y0, x1, y1) in tile_windows(w, h, tile, halo)]
+
+
+def _halving_tile(counts: np.ndarray, halo: int, limit: int) -> int:
+    """The tile choice before the cost model: halve from the frame's size until the fullest window fits."""
+    from ranad_core.denoise import ALIGN
+
+    tile = ALIGN * max(1, -(-max(counts.shape) // ALIGN))
+    while tile > ALIGN and max(_haloed_bins_by_hand(counts, tile, halo)) > limit:
+        tile = max(ALIGN, (tile // 2) // ALIGN * ALIGN)
+    return tile
+
+
+@pytest.mark.parametrize("shape,limit_px", [((1080, 1920), 1.2e6), ((1080, 1920), 1.8e6), ((270, 480), 5e4),
+                                            ((200, 100), 1e6), ((77, 301), 9e3)])
+def test_tile_choice_fits_the_budget_and_computes_the_fewest_bins(shape, limit_px):
+    """choose_tile: every haloed window fits the budget, no more bins are computed than with the halving choice it
+    replaced (1080p: 960 px tiles leave a 120-row sliver that pays a whole halo), and a frame that fits whole is
+    one tile. Bin counts vary across the frame (1-3 per pixel), and windows are counted here by hand."""
+    from ranad_core.denoise import BYTES_PER_BIN, choose_tile
+
+    rng = np.random.default_rng(shape[0])
+    counts = rng.integers(1, 4, size=shape)
+    offsets = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
+    halo = 16
+    limit = int(limit_px * 2)   # about 2 bins per pixel
+    tile = choose_tile(offsets, shape[1], shape[0], halo, limit * BYTES_PER_BIN)
+    chosen = _haloed_bins_by_hand(counts, tile, halo)
+    assert max(chosen) <= limit
+    old = _halving_tile(counts, halo, limit)
+    assert sum(chosen) <= sum(_haloed_bins_by_hand(counts, old, halo))
+    if counts.sum() <= limit:
+        assert len(chosen) == 1
+    if shape == (1080, 1920) and limit_px == 1.2e6:
+        assert old == 960 and sum(chosen) < 0.98 * sum(_haloed_bins_by_hand(counts, old, halo))
