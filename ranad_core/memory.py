@@ -6,6 +6,8 @@ frame and its neighbours, the output: `frame_working_bytes`), plus the idle buff
 (bounded by RANAD_RANA_BUFFER_CACHE_MB, which `cap_kernel_cache` sizes to the ceiling), plus the tiles' working
 memory (denoise.BYTES_PER_BIN per bin of the largest haloed window). The tiles get what is left; when that is too
 little for one minimal tile the frame cannot be denoised within the ceiling, and the error says how much it needs.
+Before the tiles, making the frame's inputs and flat prior peaks once (`prior_peak_bytes`: OIDN's scratch, released
+before the tiles start); that peak has to fit the ceiling as well.
 
 On a GPU (`--device cuda`) the tiles' working memory sits in the GPU's memory, which `--max-memory` does not
 describe: the tiles are then also sized to what the GPU has free when the frame starts (`device_free_bytes`, less
@@ -48,18 +50,28 @@ def kernel_cache_bytes() -> float:
 
 
 def frame_working_bytes(images: list, centre: int) -> float:
-    """Bytes a frame's denoising adds to the frames already read, besides the tiles. Measured (bench/denoise.py
-    frames, 1920x1080 tiled from held-out 16-spp deep-Z frames, 38 channels; peak less the resident set before and
-    less 1.6 KB per bin of the largest tile window): 2364 MiB at 1.9 M bins (281 MiB of values) and 3227 MiB at
-    4.7 M bins (683 MiB). That fits 1.7x the values + 64 B per bin + 890 B per pixel: the canonical and sorted
-    copies and the output scale with the values, the whole-frame flat prior (OIDN's buffers, the flattened guides)
-    with the pixels. Taken here as 2x the values + 64 B per bin + 900 B per pixel for the centre, and each
-    neighbour's compensated, sorted copy with its own prior images as its values + 64 B per bin + 128 B per pixel."""
+    """Bytes a frame's denoising holds beside the tiles, on top of the frames already read: the canonical and
+    sorted copies with the flat prior's channels, the outputs, small per-pixel images; for each neighbour its
+    compensated, sorted copy. Measured (the 1080p frame of bench/denoise.py tiled from heldout_g1/scene_0005,
+    2.9 M bins, 422 MB of values): 922 MB held after the frame's inputs are made, plus 128 MB of outputs. Taken
+    here as 2x the values + 64 B per bin + 128 B per pixel for the centre, the values + 64 B per bin + 128 B per
+    pixel per neighbour. The flat prior's OIDN scratch is
+    released before the tiles (prior.released_oidn); it is the transient of `prior_peak_bytes`."""
     c = images[centre]
-    extra = 2.0 * c.values.nbytes + 64.0 * c.num_bins + 900.0 * c.width * c.height
+    extra = 2.0 * c.values.nbytes + 64.0 * c.num_bins + 128.0 * c.width * c.height
     extra += sum(im.values.nbytes + 64.0 * im.num_bins + 128.0 * im.width * im.height
                  for i, im in enumerate(images) if i != centre)
     return extra
+
+
+def prior_peak_bytes(images: list, centre: int) -> float:
+    """The transient peak of making a frame's inputs and flat prior, on top of the frames already read: the
+    canonical and sorted copies, the prior's columns, the flattened images and OIDN's scratch (about 580 B per
+    pixel at 1080p). Measured on the same frame as frame_working_bytes: 2247 MB above the resident set. Taken as
+    2.5x the values + 64 B per bin + 600 B per pixel of the largest frame of the window (frames are prepared one at
+    a time), which gave 2.49 GB there."""
+    big = max(images, key=lambda im: im.values.nbytes + 600.0 * im.width * im.height)
+    return 2.5 * big.values.nbytes + 64.0 * big.num_bins + 600.0 * big.width * big.height
 
 
 def fmt(n: float) -> str:
@@ -72,6 +84,12 @@ def tile_budget(max_memory: float, images: list, centre: int) -> tuple[float, fl
     """(bytes the tiles may use, bytes everything else takes) under the ceiling `max_memory` for this frame."""
     other = resident_bytes() + frame_working_bytes(images, centre) + kernel_cache_bytes() + MARGIN * max_memory
     return max_memory - other, other
+
+
+def prior_need(max_memory: float, images: list, centre: int) -> float:
+    """Bytes the frame's inputs and flat prior need at their peak, the process's resident set included; more than
+    `max_memory` means the frame cannot be prepared within the ceiling, whatever the tiles."""
+    return resident_bytes() + prior_peak_bytes(images, centre) + kernel_cache_bytes() + MARGIN * max_memory
 
 
 def device_free_bytes(device) -> float:
@@ -94,10 +112,14 @@ def too_small_on_device(free: float, minimal_tile: float, tile: int, halo: int, 
                       f"{halo}-pixel halo needs {fmt(minimal_tile)}: free GPU memory or run with --device cpu", where)
 
 
-def too_small(max_memory: float, other: float, minimal_tile: float, tile: int, halo: int, where: str) -> RanadError:
-    """The error for a ceiling that does not fit one minimal tile, with the size that would."""
-    need = other + minimal_tile
+def too_small(max_memory: float, other: float, minimal_tile: float, tile: int, halo: int, where: str,
+              prior: float = 0.0) -> RanadError:
+    """The error for a ceiling that does not fit one minimal tile, or (`prior`: prior_need) the peak of making the
+    frame's inputs and flat prior, with the size that fits both."""
+    need = max(other + minimal_tile, prior)
+    made = (f"; making its inputs and flat prior needs {fmt(prior)} (OIDN's buffers included)"
+            if prior > max_memory else "")
     return RanadError(f"--max-memory {fmt(max_memory)} is too small for this frame: {fmt(other)} is held or needed "
                       f"besides the tiles (the process, the frames, their working copies, the kernels' buffers) and "
-                      f"one {tile}-pixel tile with its {halo}-pixel halo needs {fmt(minimal_tile)}; use at least "
-                      f"--max-memory {fmt(need * 1.05)}", where)
+                      f"one {tile}-pixel tile with its {halo}-pixel halo needs {fmt(minimal_tile)}{made}; use at "
+                      f"least --max-memory {fmt(need * 1.05)}", where)

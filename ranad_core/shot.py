@@ -18,7 +18,7 @@ from dataclasses import dataclass, field
 
 from . import cache as cache_io
 from .channels import REQUIRED, detect, motion_candidates
-from .denoise import ALIGN, choose_tile, denoise_window, halo_for, is_cross_frame, tile_bytes
+from .denoise import ALIGN, choose_tile, denoise_window, halo_for, is_cross_frame, model_features, tile_bytes
 from .errors import RanadError
 from .profile import stage
 from .exr import read_deep, read_header, resolve_part, write_parts
@@ -172,19 +172,21 @@ def first_frame(path: str, opts: "ShotOptions"):
 
 
 def choose_frame_tile(images, centre, halo: int, max_memory: float, where: str,
-                      device_free: float = float("inf")) -> int:
-    """The largest tile that keeps this frame's denoising under the ceiling `max_memory` (memory.py) and, for a
-    model on a GPU, inside `device_free` bytes of GPU memory (memory.device_free_bytes); a RanadError when even
-    the smallest tile does not fit."""
+                      device_free: float = float("inf"), prior: bool = False) -> int:
+    """The tile (choose_tile) that keeps this frame's denoising under the ceiling `max_memory` (memory.py) and, for
+    a model on a GPU, inside `device_free` bytes of GPU memory (memory.device_free_bytes); a RanadError when even
+    the smallest tile does not fit, or (`prior`: a model on the flat prior) when making the frame's prior would
+    not."""
     from . import memory
 
     img = images[centre]
+    prior_need = memory.prior_need(max_memory, images, centre) if prior else 0.0
     budget, other = memory.tile_budget(max_memory, images, centre)
     tile = choose_tile(img.offsets, img.width, img.height, halo, min(budget, device_free), len(images))
-    if tile == ALIGN:
+    if tile == ALIGN or prior_need > max_memory:
         need = tile_bytes(img.offsets, img.width, img.height, ALIGN, halo, len(images))
-        if need > budget:
-            raise memory.too_small(max_memory, other, need, ALIGN, halo, where)
+        if need > budget or prior_need > max_memory:
+            raise memory.too_small(max_memory, other, need, ALIGN, halo, where, prior_need)
         if need > device_free:
             raise memory.too_small_on_device(device_free, need, ALIGN, halo, where)
     return tile
@@ -415,7 +417,8 @@ def _denoise_part(model, images, centre, flows, where, opts, summary, halo, tile
         from .memory import device_free_bytes
 
         tile = choose_frame_tile(images, centre, halo, opts.max_memory, where,
-                                 device_free_bytes(next(model.parameters()).device))
+                                 device_free_bytes(next(model.parameters()).device),
+                                 model_features(model) == "prior")
     ntiles = sum(1 for _ in range(0, img.height, tile)) * sum(1 for _ in range(0, img.width, tile))
     if tile_bar is not None and hasattr(tile_bar, "reset"):
         tile_bar.reset(ntiles)

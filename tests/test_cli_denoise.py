@@ -158,6 +158,24 @@ def test_max_memory_is_the_tile_budget(tmp_path, model_file, monkeypatch):
     assert r.exit_code == 0, r.output
 
 
+def test_max_memory_covers_the_flat_prior(tmp_path, monkeypatch):
+    """A model on the flat prior: making the frame's inputs and prior (OIDN's buffers) has to fit the ceiling too.
+    Its peak (memory.prior_peak_bytes, about 1 KB per pixel, small for this frame) is stood in for: above the
+    ceiling, a one-line error naming the prior and a size, no output; with that size the frame is denoised."""
+    from ranad_core import memory
+
+    monkeypatch.setattr(memory, "prior_peak_bytes", lambda images, centre: 3 * 2**30)
+    r = run("denoise", FRAME, "-o", tmp_path / "p.exr", "--model", "cpu-small-pd-v4", "--max-memory", "3G")
+    assert r.exit_code == 2 and not (tmp_path / "p.exr").exists()
+    line = r.output.strip().splitlines()[-1]
+    assert "--max-memory 3.00 GB is too small for this frame" in line and "flat prior" in line
+    need = float(line.rsplit("--max-memory ", 1)[1].split()[0]) * (2**30 if line.endswith("GB") else 2**20)
+    assert need > 3 * 2**30
+    r = run("denoise", FRAME, "-o", tmp_path / "p.exr", "--model", "cpu-small-pd-v4", "--max-memory",
+            f"{int(need / 2**20) + 64}M")
+    assert r.exit_code == 0, r.output
+
+
 def test_gpu_free_memory_bounds_the_tiles(tmp_path, model_file, monkeypatch):
     """A model on a GPU gets tiles sized to the GPU's free memory as well as to --max-memory: the smaller budget
     reaches the tile choice, and a GPU too full for one minimal tile is a one-line error with no output. The GPU's

@@ -103,6 +103,28 @@ def test_prior_is_oidn_of_the_flattened_frame(frame):
     assert frame_scale(img) == pytest.approx(exposure_scale(ref), rel=1e-6)
 
 
+def test_prior_releases_oidn_and_equals_the_cached_call(frame):
+    """The flat prior's OIDN runs on a device and filter released after the call (prior.released_oidn): nothing of
+    it is left in pyoidn's process-wide cache, whose filter scratch (1.2 GB at 1080p) would sit beside the tiles;
+    the result is bitwise what pyoidn.denoise (the cached call) gives."""
+    import sys
+
+    import pyoidn
+
+    from ranad_core.model.prior import released_oidn
+
+    cache = sys.modules["pyoidn.denoise"]._denoiser
+    cache.close()
+    with_prior(frame)
+    assert cache._resources == {}
+    rng = np.random.default_rng(3)
+    colour, albedo = rng.random((40, 56, 3), np.float32) * 4, rng.random((40, 56, 3), np.float32)
+    normal = rng.random((40, 56, 3), np.float32) * 2 - 1
+    own = released_oidn(pyoidn, colour, {"albedo": albedo, "normal": normal})
+    np.testing.assert_array_equal(own, pyoidn.denoise(colour, albedo, normal, hdr=True))
+    assert float(np.abs(own - colour).mean()) > 0.05   # it denoised
+
+
 def test_tiles_equal_the_whole_frame_with_the_prior(frame):
     model = tiny("prior")
     whole = denoise_frame(model, frame).image
