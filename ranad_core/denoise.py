@@ -149,6 +149,12 @@ def tile_bytes(offsets: np.ndarray, width: int, height: int, tile: int, halo: in
 # a tile's fixed cost, in bins' worth of model work (its gather, launches, scatter): among tilings that compute
 # nearly the same bins, the one with fewer tiles wins
 TILE_OVERHEAD_BINS = 20000
+# on the CPU, the most bins of one haloed window the tile choice aims for, whatever the memory budget: larger tiles
+# are no faster per bin and hold more memory. Measured on the held-out 1080p frame of bench/denoise.py (`ranad
+# denoise --profile`, 2 threads, single runs whose spread is about 5%): 8.2 us per haloed bin with windows of 0.1-0.4
+# M bins, 8.5-9.5 at 0.6 M, 9.2-9.5 at 1.7 M. With this cap that frame runs in 6 tiles (0.61 M bins at most, 1.03x
+# the bins) instead of 2, at a 3.5 GB peak instead of 5.5.
+CPU_TILE_BINS = 800_000
 
 
 def tile_candidates(width: int, height: int) -> list:
@@ -158,15 +164,18 @@ def tile_candidates(width: int, height: int) -> list:
 
 
 def choose_tile(offsets: np.ndarray, width: int, height: int, halo: int, budget_bytes: float,
-                frames: int = 1) -> int:
+                frames: int = 1, max_bins: int | None = None) -> int:
     """The aligned tile with the least work whose haloed windows all fit the memory budget: the fewest bins
     computed (the halos overlap; a tiling whose last row or column is a sliver pays a whole halo for it) plus
     TILE_OVERHEAD_BINS per tile, over tile_candidates. ALIGN when none fits (the caller checks that size against
-    the budget with tile_bytes); `frames` windows of frames share the budget."""
+    the budget with tile_bytes); `frames` windows of frames share the budget; `max_bins`: a cap on a window's bins
+    per frame besides the budget (CPU_TILE_BINS on the CPU)."""
     if width <= 0 or height <= 0:
         return ALIGN
     integral = _bins_integral(offsets, width, height)
     limit = max(1, int(budget_bytes // (BYTES_PER_BIN * frames)))
+    if max_bins is not None:
+        limit = min(limit, max_bins)
     best = None
     for tile in tile_candidates(width, height):
         if best is not None and tile * 4 < best[1]:

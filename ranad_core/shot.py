@@ -18,7 +18,8 @@ from dataclasses import dataclass, field
 
 from . import cache as cache_io
 from .channels import REQUIRED, detect, motion_candidates
-from .denoise import ALIGN, choose_tile, denoise_window, halo_for, is_cross_frame, model_features, tile_bytes
+from .denoise import (ALIGN, CPU_TILE_BINS, choose_tile, denoise_window, halo_for, is_cross_frame, model_features,
+                      tile_bytes)
 from .errors import RanadError
 from .profile import stage
 from .exr import read_deep, read_header, resolve_part, write_parts
@@ -172,7 +173,7 @@ def first_frame(path: str, opts: "ShotOptions"):
 
 
 def choose_frame_tile(images, centre, halo: int, max_memory: float, where: str,
-                      device_free: float = float("inf"), prior: bool = False) -> int:
+                      device_free: float = float("inf"), prior: bool = False, max_bins: int | None = None) -> int:
     """The tile (choose_tile) that keeps this frame's denoising under the ceiling `max_memory` (memory.py) and, for
     a model on a GPU, inside `device_free` bytes of GPU memory (memory.device_free_bytes); a RanadError when even
     the smallest tile does not fit, or (`prior`: a model on the flat prior) when making the frame's prior would
@@ -182,7 +183,7 @@ def choose_frame_tile(images, centre, halo: int, max_memory: float, where: str,
     img = images[centre]
     prior_need = memory.prior_need(max_memory, images, centre) if prior else 0.0
     budget, other = memory.tile_budget(max_memory, images, centre)
-    tile = choose_tile(img.offsets, img.width, img.height, halo, min(budget, device_free), len(images))
+    tile = choose_tile(img.offsets, img.width, img.height, halo, min(budget, device_free), len(images), max_bins)
     if tile == ALIGN or prior_need > max_memory:
         need = tile_bytes(img.offsets, img.width, img.height, ALIGN, halo, len(images))
         if need > budget or prior_need > max_memory:
@@ -416,9 +417,9 @@ def _denoise_part(model, images, centre, flows, where, opts, summary, halo, tile
     else:
         from .memory import device_free_bytes
 
-        tile = choose_frame_tile(images, centre, halo, opts.max_memory, where,
-                                 device_free_bytes(next(model.parameters()).device),
-                                 model_features(model) == "prior")
+        device = next(model.parameters()).device
+        tile = choose_frame_tile(images, centre, halo, opts.max_memory, where, device_free_bytes(device),
+                                 model_features(model) == "prior", CPU_TILE_BINS if device.type == "cpu" else None)
     ntiles = sum(1 for _ in range(0, img.height, tile)) * sum(1 for _ in range(0, img.width, tile))
     if tile_bar is not None and hasattr(tile_bar, "reset"):
         tile_bar.reset(ntiles)

@@ -117,8 +117,8 @@ def spy_on_tile_choice(monkeypatch) -> list:
     calls = []
     real = shot_mod.choose_tile
 
-    def spy(offsets, width, height, halo, budget, frames=1):
-        calls.append((budget, real(offsets, width, height, halo, budget, frames)))
+    def spy(offsets, width, height, halo, budget, frames=1, max_bins=None):
+        calls.append((budget, real(offsets, width, height, halo, budget, frames, max_bins)))
         return calls[-1][1]
 
     monkeypatch.setattr(shot_mod, "choose_tile", spy)

@@ -247,6 +247,9 @@ def test_tile_choice_fits_the_budget_and_computes_the_fewest_bins(shape, limit_p
     limit = int(limit_px * 2)   # about 2 bins per pixel
     tile = choose_tile(offsets, shape[1], shape[0], halo, limit * BYTES_PER_BIN)
     chosen = _haloed_bins_by_hand(counts, tile, halo)
+    capped = _haloed_bins_by_hand(counts, choose_tile(offsets, shape[1], shape[0], halo, limit * BYTES_PER_BIN,
+                                                      max_bins=limit // 3), halo)
+    assert max(capped) <= limit // 3 or len(capped) == (-(-shape[0] // 16)) * (-(-shape[1] // 16))
     assert max(chosen) <= limit
     old = _halving_tile(counts, halo, limit)
     assert sum(chosen) <= sum(_haloed_bins_by_hand(counts, old, halo))
