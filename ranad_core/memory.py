@@ -55,8 +55,8 @@ def frame_working_bytes(images: list, centre: int) -> float:
     compensated, sorted copy. Measured (the 1080p frame of bench/denoise.py tiled from heldout_g1/scene_0005,
     2.9 M bins, 422 MB of values): 922 MB held after the frame's inputs are made, plus 128 MB of outputs. Taken
     here as 2x the values + 64 B per bin + 128 B per pixel for the centre, the values + 64 B per bin + 128 B per
-    pixel per neighbour. The flat prior's OIDN scratch is
-    released before the tiles (prior.released_oidn); it is the transient of `prior_peak_bytes`."""
+    pixel per neighbour. The flat prior's OIDN scratch is released before the tiles (prior.released_oidn); it is
+    part of the transient `prior_peak_bytes`."""
     c = images[centre]
     extra = 2.0 * c.values.nbytes + 64.0 * c.num_bins + 128.0 * c.width * c.height
     extra += sum(im.values.nbytes + 64.0 * im.num_bins + 128.0 * im.width * im.height
