@@ -183,9 +183,6 @@ class DeepImage:
         z = self.values[:, zi]
         zb = z if zbi is None else self.values[:, zbi]
         perm = _sort_bins(self.pixel_index(), z, zb)
-        if np.array_equal(perm, np.arange(perm.size)):   # already sorted (most renderers' files): a plain copy
-            return replace(self, values=self.values.copy(), ids={k: v.copy() for k, v in self.ids.items()},
-                           channel_types=dict(self.channel_types), header=dict(self.header)), perm
         return gather_bins(self, perm, self.offsets), perm
 
     def measured_state(self) -> str:
@@ -460,10 +457,18 @@ def gather_bins(image: DeepImage, bin_indices: np.ndarray, offsets: np.ndarray,
     plus new offsets. Channels, types, display window and header are kept.
     """
     bin_indices = np.asarray(bin_indices, dtype=np.int64)
-    return replace(image, values=np.take(image.values, bin_indices, axis=0), offsets=offsets,
-                   ids={k: v[bin_indices] for k, v in image.ids.items()},
+    if _is_identity(bin_indices, image.num_bins):   # every bin in place (a file already sorted): a plain copy
+        values, ids = image.values.copy(), {k: v.copy() for k, v in image.ids.items()}
+    else:
+        values, ids = np.take(image.values, bin_indices, axis=0), {k: v[bin_indices] for k, v in image.ids.items()}
+    return replace(image, values=values, offsets=offsets, ids=ids,
                    data_window=image.data_window if data_window is None else data_window,
                    channel_types=dict(image.channel_types), header=dict(image.header))
+
+
+def _is_identity(indices: np.ndarray, n: int) -> bool:
+    """Whether `indices` is 0, 1, ..., n - 1: a gather or permutation that moves nothing."""
+    return len(indices) == n and np.array_equal(indices, np.arange(n))
 
 
 def inverse_permutation(perm: np.ndarray) -> np.ndarray:
@@ -478,7 +483,7 @@ def unsort(values: Any, perm: np.ndarray) -> Any:
     """Put per-bin ``values`` (numpy array or torch tensor, bins on axis 0) of a sorted image back in the
     order of the image :meth:`DeepImage.sorted` was called on: ``unsort(img.sorted()[0].values, perm)``
     equals ``img.values``. Works on torch tensors (differentiably) as well as numpy arrays."""
-    if np.array_equal(perm, np.arange(len(perm))):   # the image was sorted already: the order is the file's
+    if _is_identity(perm, len(perm)):   # the image was sorted already: the order is the file's
         return values.copy() if isinstance(values, np.ndarray) else values.clone()
     inv = inverse_permutation(perm)
     if isinstance(values, np.ndarray):

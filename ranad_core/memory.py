@@ -70,8 +70,7 @@ def prior_peak_bytes(images: list, centre: int) -> float:
     pixel at 1080p). Measured on the same frame as frame_working_bytes: 2247 MB above the resident set. Taken as
     2.5x the values + 64 B per bin + 600 B per pixel of the largest frame of the window (frames are prepared one at
     a time), which gave 2.49 GB there."""
-    big = max(images, key=lambda im: im.values.nbytes + 600.0 * im.width * im.height)
-    return 2.5 * big.values.nbytes + 64.0 * big.num_bins + 600.0 * big.width * big.height
+    return max(2.5 * im.values.nbytes + 64.0 * im.num_bins + 600.0 * im.width * im.height for im in images)
 
 
 def fmt(n: float) -> str:
