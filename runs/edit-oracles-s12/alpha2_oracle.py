@@ -2,28 +2,21 @@
 the learned edge-aware weights), and the alpha MAE against the reference.
 
 Usage: python runs/edit-oracles-s12/alpha2_oracle.py DATASET MODEL SPP [deepz|deepoid]"""
-import glob, os, sys
+import sys
 import numpy as np, torch
 from ranad_core.channels import ALPHA, detect
-from ranad_core.denoise import denoise_frame, _model_frame, model_features
+from ranad_core.denoise import _model_frame, model_features
 from ranad_core.model.inputs import prepare
 from ranad_core.deep import unsort
-from ranad_core.exr import read_deep
-from ranad_core.metrics import composite_edit, flip, split_depth, with_depths_of
+from ranad_core.metrics import composite_edit, flip, split_depth
 from ranad_core.model.store import load_model
-from ranad_core.baselines import oidn_flat, recolour
 
-def set_alpha(img, a):
-    v = img.values.copy(); v[:, img.channels.index(ALPHA)] = a; return img.with_values(v)
+from common import scenes, set_alpha
 
 def main(dataset, model_name, spp, kind="deepz"):
     model = load_model(model_name).model
     tot, n = {}, 0
-    for scene in sorted(glob.glob(os.path.join(dataset, "scene_*"))):
-        noisy = read_deep(f"{scene}/{kind}/noisy_spp{spp}.0000.exr")
-        ref = read_deep(f"{scene}/{kind}/reference_spp{spp}.0000.exr")
-        out = with_depths_of(denoise_frame(model, noisy).image, ref)
-        base = with_depths_of(recolour(noisy, oidn_flat(noisy)), ref)
+    for name, noisy, ref, out, base, _ in scenes(dataset, model, spp, kind):
         fr = _model_frame(noisy, detect(noisy), model_features(model), None)
         inp = prepare(fr.srt, fr.stats, fr.features, fr.scale)
         alphas = {}
@@ -43,7 +36,7 @@ def main(dataset, model_name, spp, kind="deepz"):
         ar = ref.channel(ALPHA)
         for k in (1, 2, 3):
             row[f"mae k{k}"] = float(np.abs(alphas[k] - ar).mean())
-        print(os.path.basename(scene), " ".join(f"{k} {v:.4f}" for k, v in row.items()), flush=True)
+        print(name, " ".join(f"{k} {v:.4f}" for k, v in row.items()), flush=True)
         for k, v in row.items(): tot[k] = tot.get(k, 0) + v
         n += 1
     r = tot["recolour"]

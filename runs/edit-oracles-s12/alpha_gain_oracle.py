@@ -2,14 +2,13 @@
 bin of multi-bin pixels), factors fitted as ref-mean/model-mean on a fitting set, applied on a test set.
 
 Usage: python runs/edit-oracles-s12/alpha_gain_oracle.py FIT_SET TEST_SET [MODEL]   (deep-Z, 16 spp)"""
-import glob, os, sys
+import sys
 import numpy as np
 from ranad_core.channels import ALPHA
-from ranad_core.denoise import denoise_frame
-from ranad_core.exr import read_deep
-from ranad_core.metrics import composite_edit, flip, split_depth, with_depths_of
+from ranad_core.metrics import composite_edit, flip, split_depth
 from ranad_core.model.store import load_model
-from ranad_core.baselines import oidn_flat, recolour
+
+from common import scenes
 model = load_model(sys.argv[3] if len(sys.argv) > 3 else "cpu-small-pd-v4").model
 CLASSES = ("single", "front", "mid", "last")
 
@@ -19,14 +18,7 @@ def classes(img):
             "last": (cnt > 1) & (bi == cnt - 1)}
 
 def run(dataset, spp="16", kind="deepz"):
-    res = []
-    for scene in sorted(glob.glob(os.path.join(dataset, "scene_*"))):
-        noisy = read_deep(f"{scene}/{kind}/noisy_spp{spp}.0000.exr")
-        ref = read_deep(f"{scene}/{kind}/reference_spp{spp}.0000.exr")
-        out = with_depths_of(denoise_frame(model, noisy).image, ref)
-        base = with_depths_of(recolour(noisy, oidn_flat(noisy)), ref)
-        res.append((noisy, ref, out, base))
-    return res
+    return [(noisy, ref, out, base) for _, noisy, ref, out, base, _ in scenes(dataset, model, spp, kind)]
 
 def fit(res):
     num = {c: 0.0 for c in CLASSES}; den = {c: 0.0 for c in CLASSES}

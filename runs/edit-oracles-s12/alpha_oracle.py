@@ -2,26 +2,18 @@
 reference's; and recolour's with the model's alpha.
 
 Usage: python runs/edit-oracles-s12/alpha_oracle.py DATASET MODEL SPP [deepz|deepoid]"""
-import glob, os, sys
+import sys
 import numpy as np
 from ranad_core.channels import ALPHA
-from ranad_core.denoise import denoise_frame
-from ranad_core.exr import read_deep
-from ranad_core.metrics import composite_edit, flip, split_depth, with_depths_of
+from ranad_core.metrics import composite_edit, flip, split_depth
 from ranad_core.model.store import load_model
-from ranad_core.baselines import oidn_flat, recolour
 
-def set_alpha(img, a):
-    v = img.values.copy(); v[:, img.channels.index(ALPHA)] = a; return img.with_values(v)
+from common import scenes, set_alpha
 
 def main(dataset, model_name, spp, kind="deepz"):
     model = load_model(model_name).model
     tot, n = {}, 0
-    for scene in sorted(glob.glob(os.path.join(dataset, "scene_*"))):
-        noisy = read_deep(f"{scene}/{kind}/noisy_spp{spp}.0000.exr")
-        ref = read_deep(f"{scene}/{kind}/reference_spp{spp}.0000.exr")
-        out = with_depths_of(denoise_frame(model, noisy).image, ref)
-        base = with_depths_of(recolour(noisy, oidn_flat(noisy)), ref)
+    for name, noisy, ref, out, base, _ in scenes(dataset, model, spp, kind):
         an, ao, ar = noisy.channel(ALPHA), out.channel(ALPHA), ref.channel(ALPHA)
         z = split_depth(ref); target = composite_edit(ref, z)
         cases = {"recolour": base, "model": out, "noisy alpha": set_alpha(out, an),
@@ -29,7 +21,7 @@ def main(dataset, model_name, spp, kind="deepz"):
                  "recolour+model alpha": set_alpha(base, ao)}
         row = {k: flip(target, composite_edit(c, z)) for k, c in cases.items()}
         row["alpha mae model"] = float(np.abs(ao - ar).mean()); row["alpha mae noisy"] = float(np.abs(an - ar).mean())
-        print(os.path.basename(scene), " ".join(f"{k} {v:.4f}" for k, v in row.items()), flush=True)
+        print(name, " ".join(f"{k} {v:.4f}" for k, v in row.items()), flush=True)
         for k, v in row.items(): tot[k] = tot.get(k, 0) + v
         n += 1
     r = tot["recolour"]

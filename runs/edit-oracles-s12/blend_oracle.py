@@ -2,14 +2,14 @@
 recolour(out, OIDN)), per gain g: edit FLIP against recolour's and flat FLIP against OIDN's.
 
 Usage: python runs/edit-oracles-s12/blend_oracle.py DATASET MODEL SPP [deepz|deepoid]"""
-import glob, os, sys
+import sys
 import numpy as np
 from ranad_core.channels import RGB
-from ranad_core.denoise import denoise_frame
-from ranad_core.exr import read_deep
-from ranad_core.metrics import flat_rgb, composite_edit, flip, split_depth, with_depths_of
+from ranad_core.metrics import flat_rgb, composite_edit, flip, split_depth
 from ranad_core.model.store import load_model
-from ranad_core.baselines import oidn_flat, recolour
+
+from common import scenes
+from ranad_core.baselines import recolour
 
 def blend(a, b, g):
     v = a.values.copy(); idx = [a.channels.index(c) for c in RGB]
@@ -20,13 +20,8 @@ def blend(a, b, g):
 def main(dataset, model_name, spp, kind="deepz"):
     model = load_model(model_name).model
     tot, n = {}, 0
-    for scene in sorted(glob.glob(os.path.join(dataset, "scene_*"))):
-        noisy = read_deep(f"{scene}/{kind}/noisy_spp{spp}.0000.exr")
-        ref = read_deep(f"{scene}/{kind}/reference_spp{spp}.0000.exr")
-        out = with_depths_of(denoise_frame(model, noisy).image, ref)
-        fl = oidn_flat(noisy)
+    for name, noisy, ref, out, base, fl in scenes(dataset, model, spp, kind):
         rc_out = recolour(out, fl)
-        base = with_depths_of(recolour(noisy, fl), ref)
         counts = np.diff(ref.offsets)
         z = split_depth(ref); target = composite_edit(ref, z)
         cases = {"recolour": base}
@@ -41,7 +36,7 @@ def main(dataset, model_name, spp, kind="deepz"):
         row["flat oidn"] = flip(fr, fl.reshape(fr.shape))
         for g in (0, 0.5, 1.0):
             row[f"flat g{g}"] = flip(fr, flat_rgb(cases[f"g{g}"]))
-        print(os.path.basename(scene), f"multi {np.mean(counts > 1):.2f}",
+        print(name, f"multi {np.mean(counts > 1):.2f}",
               " ".join(f"{k} {v:.4f}" for k, v in row.items()), flush=True)
         for k, v in row.items(): tot[k] = tot.get(k, 0) + v
         n += 1
