@@ -23,6 +23,18 @@ def _loss_weight(text: str) -> tuple[str, float]:
     return name, weight
 
 
+def _spp_weight(text: str) -> tuple[int, float]:
+    """'SPP=W' -> (SPP, W), or a usage error."""
+    spp, _, value = text.partition("=")
+    try:
+        pair = int(spp), float(value)
+    except ValueError:
+        pair = 0, -1.0
+    if pair[0] < 1 or not pair[1] >= 0:
+        raise click.BadParameter(f"{text!r}: expected SPP=W with SPP >= 1 and W >= 0", param_hint="--spp-weight")
+    return pair
+
+
 @click.command("train")
 @click.argument("datasets", nargs=-1, required=True, type=click.Path(file_okay=False))
 @click.option("-o", "--run", required=True, type=click.Path(file_okay=False),
@@ -67,10 +79,14 @@ def _loss_weight(text: str) -> tuple[str, float]:
                   "front of and behind the crop's median depth, each alone (what a holdout sees); 'separation_ssim' "
                   "adds the SSIM term on those two composites; 'edit' and 'edit_ssim' score the compositing edit "
                   "that `ranad eval` scores (front recoloured, a layer inserted at that depth).")
+@click.option("--spp-weight", "spp_weights", multiple=True, metavar="SPP=W",
+              help="Relative odds of drawing a training crop of that sample count (repeatable; counts not named "
+                   "weigh 1), e.g. 64=2 to show clean renders twice as often, where the model over-smooths them.")
 @device_option("the model trains", " Crops are made on the CPU either way; data-parallel --processes run on the "
                "CPU.")
 def train_cmd(datasets, run, config, steps, crop, lr, seed, checkpoint_every, processes, p_no_aux, p_no_split, window,
-              init, temporal_weight, until, freeze_spatial, p_misalign, loss_weights, device):
+              init, temporal_weight, until, freeze_spatial, p_misalign, loss_weights, spp_weights,
+              device):
     """Train on DATASETS (one or several outputs of `ranad synth`, their scenes pooled): centre-frame pairs,
     random crops, flips and transposes, SMAPE on the diffuse and specular bins and on the composited colour plus
     SSIM on it, L1 on alpha and depth. Resumes from RUN/checkpoint.pt when it exists."""
@@ -83,6 +99,7 @@ def train_cmd(datasets, run, config, steps, crop, lr, seed, checkpoint_every, pr
     except ValueError as e:
         raise click.BadParameter(str(e), param_hint="--config") from None
     weights = tuple(_loss_weight(text) for text in loss_weights)
+    odds = tuple(_spp_weight(text) for text in spp_weights)
     if processes > 1 and device == "cuda":
         raise click.BadParameter("data-parallel --processes run on the CPU; train on a GPU with one process",
                                  param_hint="--device")
@@ -92,7 +109,7 @@ def train_cmd(datasets, run, config, steps, crop, lr, seed, checkpoint_every, pr
                       checkpoint_every=checkpoint_every, p_no_aux=p_no_aux, p_no_split=p_no_split,
                       window=window, init=init, temporal_weight=temporal_weight, until=until,
                       freeze_spatial=freeze_spatial, p_misalign=p_misalign,
-                      loss_weights=weights, device=run_on)
+                      loss_weights=weights, spp_weights=odds, device=run_on)
     if processes > 1:
         spawn_local(cfg, processes)
         click.echo(f"done: {steps} steps x {processes} processes, log in {run}/train.log")

@@ -547,3 +547,38 @@ def test_cross_frame_init_must_share_the_spatial_models_dropout(tmp_path):
                                  "cpu-small-pdl-xg", "--init", "cpu-small-pd-v2", "--freeze-spatial"])
     assert r.exit_code == 2 and "dropout_lattice=False" in r.output, r.output
     assert not run.exists()
+
+
+def test_spp_weights_set_the_odds_of_each_sample_count():
+    """pair_odds: a count weighted 2 is drawn about twice as often as one left at 1, a count weighted 0 never;
+    without weights the draws are the uniform ones runs made before the option (same random stream)."""
+    from ranad_core.train.data import Pair
+    from ranad_core.train.trainer import draw, pair_odds
+
+    pairs = [Pair(Path(f"n{i}"), Path(f"r{i}"), "s", "deepz", spp) for i, spp in enumerate((4, 16, 64, 64, 4, 16))]
+    odds = pair_odds(pairs, ((64, 2.0), (16, 0.0)))
+    rng = np.random.default_rng(0)
+    drawn = [draw(pairs, odds, rng).spp for _ in range(6000)]
+    count = {s: drawn.count(s) for s in (4, 16, 64)}
+    assert count[16] == 0 and 1.8 < count[64] / count[4] < 2.2        # (2 pairs x 2) / (2 pairs x 1)
+    assert pair_odds(pairs, ()) is None
+    a, b = np.random.default_rng(3), np.random.default_rng(3)
+    assert [draw(pairs, None, a) for _ in range(20)] == [pairs[int(b.integers(0, 6))] for _ in range(20)]
+    two = [(p, p) for p in pairs]                                     # consecutive frames: tuples of one count
+    assert np.allclose(pair_odds(two, ((64, 2.0),)), pair_odds(pairs, ((64, 2.0),)))
+    with pytest.raises(RanadError, match="weight 0"):
+        pair_odds(pairs, ((4, 0.0), (16, 0.0), (64, 0.0)))
+
+
+def test_spp_weights_from_the_command_line(tmp_path):
+    """--spp-weight reaches the checkpoint's train_config; a malformed one is a usage error before any folder."""
+    ds = dataset_from_example(tmp_path / "ds")
+    run = tmp_path / "run"
+    r = CliRunner().invoke(cli, ["train", str(ds), "-o", str(run), "--steps", "2", "--crop", "16",
+                                 "--spp-weight", "64=2"])
+    assert r.exit_code == 0, r.output
+    assert dict(torch.load(run / "checkpoint.pt", weights_only=False)["train_config"]["spp_weights"]) == {64: 2.0}
+    for bad in ("64", "x=1", "0=1", "64=-1"):
+        r = CliRunner().invoke(cli, ["train", str(ds), "-o", str(tmp_path / "r2"), "--spp-weight", bad])
+        assert r.exit_code == 2 and "--spp-weight" in r.output and "SPP=W" in r.output
+    assert not (tmp_path / "r2").exists()

@@ -50,7 +50,28 @@ class TrainConfig:
     freeze_spatial: bool = False  # cross-frame configs: train only the temporal parts; the single-frame model stays
     p_misalign: float = 0.0       # cross-frame configs: share of windows with misaligned neighbours (data.cropped)
     loss_weights: tuple = ()      # (term, weight) pairs overriding weights.WEIGHTS, e.g. (("separation", 1.0),)
+    spp_weights: tuple = ()       # (spp, weight) pairs: relative odds of drawing a crop of that sample count (1)
     device: str = "cpu"           # where the model trains ("cpu" or "cuda"; crops are made on the CPU and moved)
+
+
+def pair_odds(pairs: list, spp_weights: tuple) -> np.ndarray | None:
+    """Probabilities of drawing each pair (each a Pair, or a tuple of Pairs of one sample count) when some sample
+    counts are weighted (`TrainConfig.spp_weights`; unnamed counts weigh 1); None without weights, where draws stay
+    uniform and use the random stream exactly as runs before the option did."""
+    if not spp_weights:
+        return None
+    weight = dict(spp_weights)
+    odds = np.array([weight.get((p[0] if isinstance(p, tuple) else p).spp, 1.0) for p in pairs], np.float64)
+    if not odds.sum() > 0:
+        raise RanadError("every pair of the datasets has weight 0", "--spp-weight")
+    return odds / odds.sum()
+
+
+def draw(items: list, odds: np.ndarray | None, rng: np.random.Generator):
+    """One of `items`: uniformly, or by `odds` (pair_odds)."""
+    if odds is None:
+        return items[int(rng.integers(0, len(items)))]
+    return items[int(rng.choice(len(items), p=odds))]
 
 
 def learning_rate(cfg: TrainConfig, step: int) -> float:
@@ -302,6 +323,7 @@ def train(cfg: TrainConfig, progress=None) -> dict:
     config = get_config(cfg.config)
     cross = config.window > 1
     consecutive = consecutive_pairs(cfg, cross, world)
+    odds = pair_odds(consecutive or pairs, cfg.spp_weights)
     check_freeze(cfg, config)
     torch.manual_seed(cfg.seed)
     if world > 1 and cfg.device != "cpu":  # gloo averages CPU gradients; GPU data parallelism is not wired up
@@ -335,9 +357,9 @@ def train(cfg: TrainConfig, progress=None) -> dict:
         for g in opt.param_groups:
             g["lr"] = learning_rate(cfg, step) * g["lr_scale"]
         if consecutive:
-            result = consecutive_loss(net, consecutive[int(rng.integers(0, len(consecutive)))], rng, cfg)
+            result = consecutive_loss(net, draw(consecutive, odds, rng), rng, cfg)
         else:
-            result = pair_loss(net, pairs[int(rng.integers(0, len(pairs)))], rng, cfg, cross)
+            result = pair_loss(net, draw(pairs, odds, rng), rng, cfg, cross)
         if result is None:
             continue
         loss, parts = result
