@@ -60,8 +60,8 @@ def parse_bytes(text: str) -> float:
               help="Also write the noisy versions of the replaced channels under PREFIX (e.g. 'noisy.').")
 @click.option("--keep-depth", is_flag=True,
               help="Write the input's depths (Z, ZBack) unchanged instead of denoised ones. On scene families "
-                   "held out of training the shipped models' per-bin depth error is up to 2.04x the noisy "
-                   "input's (in-family it is lower; model card of cpu-small-pd-v4).")
+                   "held out of training the shipped models' per-bin depth error is up to 1.6x (cpu-small-pdl-v1) "
+                   "and 2.04x (cpu-small-pd-v4) the noisy input's (model cards).")
 @click.option("--tile", type=click.IntRange(16), default=None,
               help="Tile size in pixels (default: the tiling that fits --max-memory with the fewest bins "
                    "computed twice in the halos; on the CPU, windows of at most 0.8 M bins).")
