@@ -25,7 +25,7 @@ from .ranad import RaNAD
 
 WEIGHTS_DIR = Path(__file__).resolve().parents[1] / "weights"
 DEFAULT_MODEL = "cpu-small-pdl-v1"       # single frames
-DEFAULT_CROSS_MODEL = "cpu-small-pd-xg-v4"  # sequences: frames with neighbours
+DEFAULT_CROSS_MODEL = "cpu-small-pdl-xg-v1"  # sequences: frames with neighbours
 
 
 def default_model(sequence: bool) -> str:
