@@ -10,29 +10,29 @@ from ranad_core.train.weights import WEIGHTS
 from .params import device_option
 
 
-def _loss_weight(text: str) -> tuple[str, float]:
-    """'TERM=W' -> (TERM, W), or a usage error naming the known terms."""
+def _weighted(text: str, key, option: str, expected: str) -> tuple:
+    """'NAME=W' -> (key(NAME), W), or a usage error saying `expected`; `key` raises ValueError (or returns None)
+    for a name the option does not take."""
     name, _, value = text.partition("=")
     try:
-        weight = float(value)
+        pair = key(name), float(value)
     except ValueError:
-        weight = -1.0
-    if name not in WEIGHTS or not weight >= 0:
-        raise click.BadParameter(f"{text!r}: expected TERM=W with W >= 0 and TERM one of {', '.join(WEIGHTS)}",
-                                 param_hint="--loss-weight")
-    return name, weight
+        pair = None, -1.0
+    if pair[0] is None or not pair[1] >= 0:
+        raise click.BadParameter(f"{text!r}: expected {expected}", param_hint=option)
+    return pair
+
+
+def _loss_weight(text: str) -> tuple[str, float]:
+    """'TERM=W' -> (TERM, W), or a usage error naming the known terms."""
+    return _weighted(text, lambda name: name if name in WEIGHTS else None, "--loss-weight",
+                     f"TERM=W with W >= 0 and TERM one of {', '.join(WEIGHTS)}")
 
 
 def _spp_weight(text: str) -> tuple[int, float]:
     """'SPP=W' -> (SPP, W), or a usage error."""
-    spp, _, value = text.partition("=")
-    try:
-        pair = int(spp), float(value)
-    except ValueError:
-        pair = 0, -1.0
-    if pair[0] < 1 or not pair[1] >= 0:
-        raise click.BadParameter(f"{text!r}: expected SPP=W with SPP >= 1 and W >= 0", param_hint="--spp-weight")
-    return pair
+    return _weighted(text, lambda name: int(name) if int(name) >= 1 else None, "--spp-weight",
+                     "SPP=W with SPP >= 1 and W >= 0")
 
 
 @click.command("train")

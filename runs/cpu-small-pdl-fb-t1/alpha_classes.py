@@ -16,10 +16,7 @@ from ranad_core.model.store import load_model  # noqa: E402
 
 def place(img):
     """Per bin: 'single', 'front', 'middle' or 'back'."""
-    cnt = np.diff(img.offsets)
-    pix = np.repeat(np.arange(cnt.size), cnt)
-    idx = np.arange(pix.size) - np.repeat(img.offsets[:-1], cnt)
-    n = cnt[pix]
+    n, idx = img.counts[img.pixel_index()], img.bin_index()
     return np.where(n == 1, "single", np.where(idx == 0, "front", np.where(idx == n - 1, "back", "middle")))
 
 
