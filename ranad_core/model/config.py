@@ -54,16 +54,23 @@ class ModelConfig:
     # zero at start: deep-Z bins made of few samples carry an alpha biased high behind the first bin (a bin exists
     # only where a sample stopped), shared by all neighbours, so no kernel removes it (runs/edit-oracles-s12)
     alpha_residual: bool = False
+    # output layers whose reconstruction kernels keep to the query bin's own depth layer (reconstruction.layer_gate):
+    # in a pixel with several bins, a key bin whose depth is nearer another bin of the query's pixel than the query
+    # bin itself weighs next to nothing. Parameter-free; single-bin pixels are untouched. Stacks of parallel
+    # semi-transparent layers, a family no training set held, got depths 2-5x worse than the noisy input's without it
+    layer_gate: tuple = ()
 
     def to_dict(self) -> dict:
         d = asdict(self)
         d["recon"] = {k: asdict(v) for k, v in self.recon.items()}
+        d["layer_gate"] = list(self.layer_gate)
         return d
 
     @classmethod
     def from_dict(cls, d: dict) -> "ModelConfig":
         d = dict(d)
         d["recon"] = {k: ReconConfig(**v) for k, v in d.get("recon", {}).items()}
+        d["layer_gate"] = tuple(d.get("layer_gate", ()))
         return cls(**d)
 
 
@@ -153,6 +160,18 @@ CONFIGS["cpu-small-pda"] = ModelConfig(**{**CONFIGS["cpu-small-pd"].__dict__, "n
 # the sequence model on cpu-small-pdl: cpu-small-pd-xg's temporal step over the lattice-dropout spatial model
 CONFIGS["cpu-small-pdl-xg"] = ModelConfig(**{**CONFIGS["cpu-small-pd-xg"].__dict__, "name": "cpu-small-pdl-xg",
                                             "dropout_lattice": True})
+
+
+# cpu-small-pdl whose depth reconstruction keeps to the bins' own depth layers (reconstruction.layer_gate): stacks
+# of semi-transparent layers, a family no training set holds, got depths 2-5x worse than the noisy input's (issue 24)
+CONFIGS["cpu-small-pdl-gz"] = ModelConfig(**{**CONFIGS["cpu-small-pdl"].__dict__, "name": "cpu-small-pdl-gz",
+                                            "layer_gate": ("depth",)})
+# ... and its alpha reconstruction too
+CONFIGS["cpu-small-pdl-gza"] = ModelConfig(**{**CONFIGS["cpu-small-pdl"].__dict__, "name": "cpu-small-pdl-gza",
+                                             "layer_gate": ("depth", "alpha")})
+# ... and every layer (colour too; measured, not trained: runs/layer-gate-s14)
+CONFIGS["cpu-small-pdl-gall"] = ModelConfig(**{**CONFIGS["cpu-small-pdl"].__dict__, "name": "cpu-small-pdl-gall",
+                                              "layer_gate": ("diffuse", "specular", "alpha", "depth")})
 
 
 def get_config(name: str) -> ModelConfig:

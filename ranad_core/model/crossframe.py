@@ -38,7 +38,7 @@ from .config import ModelConfig
 from .inputs import GUIDE_WIDTH, ModelInputs, guides
 from .layers import Layout, MultiHeadRaNA
 from .matching import MatchKernel, consistent, pixel_pairs
-from .ranad import RaNAD
+from .ranad import RaNAD, with_layer_gate
 from .reconstruction import KernelAttention, per_channel
 
 MAX_OFFSET = 3                       # frames -3..+3 around the centre (windows up to 7)
@@ -234,9 +234,10 @@ class CrossFrameRaNAD(nn.Module):
                 t = self.temporal[name](query, allf, c.layout.pixels, keys, allv, **match)
                 g = torch.sigmoid(self.temporal_gate[name](own))
                 v = v + g * (t - v)
-            out[name] = rec(own, c.layout, v)
+            out[name] = rec(own, c.layout, v, with_layer_gate(rec, None, c))
             if self.config.output_mix and len(frames) > 1:
-                spatial = [out[name] if i == centre else rec(feats[i], f.layout, vals[i])
+                spatial = [out[name] if i == centre else
+                           rec(feats[i], f.layout, vals[i], with_layer_gate(rec, None, f))
                            for i, f in enumerate(frames)]
                 m = self.mix[name](feats[centre], allf, c.layout.pixels, keys, torch.cat(spatial)[gather])
                 g = torch.sigmoid(self.mix_gate[name](feats[centre]))

@@ -13,7 +13,7 @@ from . import fused
 from .backbone import MultiUNet
 from .config import ModelConfig
 from .inputs import PRIOR_GUIDES_WIDTH, ModelInputs, prior_guides
-from .reconstruction import Reconstruction, demodulated
+from .reconstruction import Reconstruction, demodulated, layer_gate
 
 DEMODULATED = ("diffuse",)   # the layers a demodulating model divides by the albedo (inputs.modulation)
 RANGE_LR_SCALE = 10.0        # lr_scale of the prior-range weights (ModelConfig.prior_range)
@@ -29,8 +29,12 @@ class RaNAD(nn.Module):
                                   c.radius_growth, backend, c.dropout_lattice)
         self.recon = nn.ModuleDict({name: Reconstruction(c.dim, r.scales, r.heads, r.head_dim, r.radius,
                                                          r.radius_growth, backend, c.dropout_lattice,
-                                                         c.prior_range, c.alpha_residual and name == "alpha")
+                                                         c.prior_range, c.alpha_residual and name == "alpha",
+                                                         name in c.layer_gate)
                                     for name, r in c.recon.items()})
+        unknown = set(c.layer_gate) - set(c.recon)
+        if unknown:
+            raise ValueError(f"config {c.name!r}: layer_gate names layers it does not reconstruct: {sorted(unknown)}")
 
     def lr_scale(self, name: str) -> float:
         """Learning-rate multiplier of parameter `name` (trainer.param_groups): the prior-range weights start at 0
@@ -63,6 +67,7 @@ class RaNAD(nn.Module):
         guide = None
         if self.config.prior_range:   # the guides ride behind the embeddings (see embeddings)
             emb, guide = emb[:, :self.config.dim], tuple(emb[:, self.config.dim:].split(3, 1))
+        guide = with_layer_gate(self.recon[name], guide, inputs)
         return demodulated(self.recon[name], emb, inputs.layout, values, self.modulation(name, inputs), guide)
 
     def reconstruct(self, emb: torch.Tensor, inputs: ModelInputs) -> dict:
@@ -72,3 +77,14 @@ class RaNAD(nn.Module):
 
     def forward(self, inputs: ModelInputs) -> dict:
         return self.reconstruct(self.embeddings(inputs), inputs)
+
+
+def with_layer_gate(rec: Reconstruction, guide, inputs: ModelInputs):
+    """`guide` (None or (a, b)) with the layer gate's columns behind it when `rec` is gated (layer_gate of the
+    inputs' depths): what Reconstruction.forward takes."""
+    if not rec.gated:
+        return guide
+    if "depth" not in inputs.layers:
+        raise ValueError("a gated reconstruction needs the bins' depths (the inputs' depth layer)")
+    a, b = layer_gate(inputs.layers["depth"], inputs.layout)
+    return (a, b) if guide is None else (torch.cat([guide[0], a], 1), torch.cat([guide[1], b], 1))

@@ -11,6 +11,12 @@ Demodulation (`demodulated`, configs with `demodulate`): the values divided per 
 guide, inputs.modulation) before the kernels and the result multiplied by the query bin's: still linear in the
 values (the same operator denoises AOVs, and light groups still sum to the beauty), but no longer a convex
 combination of them.
+
+Layer gate (configs with `layer_gate`, `layer_gate`): the kernels of a gated layer keep to the bins' own depth
+layers, a range term -(lambda_q + lambda_k) (log z_q - log z_k)^2, each lambda set by half that bin's depth gap to
+the nearest other bin of its pixel (0 in single-bin pixels): a query of a layer stack reads only its own layer, and
+no query reads a key of a stack across that key's layers (the pyramid's blurred keys stay on their layers too).
+It only reweights, so the output stays a combination of the noisy values.
 """
 
 from __future__ import annotations
@@ -24,17 +30,43 @@ from ..rana import rana
 from . import fused
 from .layers import Layout, bin_dropout
 
+GATE_WIDTH_FLOOR = 0.02   # narrowest gate half-width in log depth (2%): keeps lambda |log z|^2 within fp32's reach
+GATE_STRENGTH = 4.0       # lambda = GATE_STRENGTH / half-width^2: a bin one gap away (the other layer) gets e^-16
+
+
+def layer_gate(depth: torch.Tensor, layout: Layout) -> tuple[torch.Tensor, torch.Tensor]:
+    """(a [N, 2], b [N, 2]), both (log z, lambda) per bin, of bins in depth order within each pixel (the order
+    denoise and training prepare them in): the layer gate's guides for the bins as queries and as keys. log z is
+    centred on its mean over the bins (the range term does not depend on the centre; small values keep the
+    logits' cancellation exact enough). lambda = GATE_STRENGTH / h^2, h half the log-depth gap to the nearest
+    other bin of the pixel (at least GATE_WIDTH_FLOOR); 0 in single-bin pixels."""
+    lz = torch.log(torch.clamp(depth[:, :1].float(), min=1e-4))
+    lz = lz - lz.mean() if lz.numel() else lz
+    pix = layout.pixels[:, 0] * layout.width + layout.pixels[:, 1]
+    n = lz.shape[0]
+    gap = torch.full((n,), float("inf"), dtype=lz.dtype, device=lz.device)
+    if n > 1:
+        same = pix[1:] == pix[:-1]
+        d = torch.where(same, (lz[1:, 0] - lz[:-1, 0]).abs(), gap.new_tensor(float("inf")))
+        gap[1:] = torch.minimum(gap[1:], d)
+        gap[:-1] = torch.minimum(gap[:-1], d)
+    h = torch.clamp(gap / 2, min=GATE_WIDTH_FLOOR)
+    lam = torch.where(torch.isfinite(gap), GATE_STRENGTH / (h * h), torch.zeros_like(h))
+    g = torch.cat([lz, lam[:, None]], 1)
+    return g, g
+
 
 class KernelAttention(nn.Module):
     """Single-purpose RaNA whose values are the noisy layer itself (no value projection): the kernel weights
     come from the embeddings, the values pass through untouched, which is what keeps the output linear."""
 
     def __init__(self, dim: int, heads: int, head_dim: int, radius: float, backend: str = "auto",
-                 prior_range: bool = False):
+                 prior_range: bool = False, gated: bool = False):
         super().__init__()
         from ..rana import disc
 
         self.heads, self.head_dim, self.radius, self.backend = heads, head_dim, float(radius), backend
+        self.gated = gated   # the guides end with the layer gate's columns (layer_gate)
         self.q = nn.Linear(dim, heads * head_dim)
         self.k = nn.Linear(dim, heads * head_dim)
         self.bias = nn.Parameter(torch.zeros(heads, disc(radius).side, disc(radius).side))
@@ -44,7 +76,8 @@ class KernelAttention(nn.Module):
 
     def forward(self, q_feat, k_feat, q_pixels, keys: Layout, values: torch.Tensor, guide=None) -> torch.Tensor:
         """values [Nk, C] -> [Nq, C]: each head's kernel applied to all C value channels, heads mixed convexly.
-        `guide`: (a [Nq, 3], b [Nk, 3]) for a prior-range module (the query's flat prior, the key's noisy flat)."""
+        `guide`: (a [Nq, *], b [Nk, *]): for a prior-range module first the query's flat prior and the key's noisy
+        flat (3 columns each), then for a gated one layer_gate's (a: 2 columns, b: 1)."""
         H, d = self.heads, self.head_dim
         if fused.active(q_feat, self.backend):
             return self._fused_forward(q_feat, k_feat, q_pixels, keys, values, guide)
@@ -56,22 +89,35 @@ class KernelAttention(nn.Module):
         return (y * torch.softmax(self.head_mix, 0)[None, :, None]).sum(1)
 
     def _with_range(self, q: torch.Tensor, k: torch.Tensor, guide) -> tuple[torch.Tensor, torch.Tensor]:
-        """q [Nq, H, d], k [Nk, H, d] extended so that the op's q'.k' / sqrt(d') is q.k / sqrt(d) - lambda_h
-        |a - b|^2 + (a term of the query alone, which the softmax ignores): q' = sqrt(d') [q / sqrt(d), 2 lambda
-        a, -lambda, 0...], k' = [k, b, |b|^2, 0...], d' the next head size the kernels compile (16 for d = 8)."""
-        if self.range is None:
+        """q [Nq, H, d], k [Nk, H, d] extended so that the op's q'.k' / sqrt(d') is q.k / sqrt(d) minus the range
+        terms (plus terms of the query alone, which the softmax ignores). Prior range, -lambda_h |a - b|^2 with
+        the head's learned lambda, a the query's prior, b the key's noisy flat: q's columns (2 lambda a, -lambda)
+        against k's (b, |b|^2). Layer gate, -(lambda_q + lambda_k) (za - zb)^2 with layer_gate's log depths and
+        lambdas: q's (2 lambda_q za, -lambda_q, za^2, za, 1) against k's (zb, zb^2, -lambda_k, 2 lambda_k zb,
+        -lambda_k zb^2). q' = sqrt(d') [q / sqrt(d), terms, 0...], k' = [k, terms, 0...], d' the next head size
+        the kernels compile (16 for d = 8 and either term, 32 for both)."""
+        if self.range is None and not self.gated:
             return q, k
         if guide is None:
-            raise ValueError("a prior-range reconstruction needs the prior guides (prior features)")
+            raise ValueError("a prior-range or gated reconstruction needs its guides (prior features, depths)")
         a, b = guide
         nq, nk, H, d = q.shape[0], k.shape[0], self.heads, self.head_dim
-        wide = next(w for w in (8, 16, 32, 64, 128) if w >= d + 4)
+        qs, ks = [], []
+        if self.range is not None:
+            lam = self.range[None, :, None]
+            qs += [2 * lam * a[:, None, :3], (-lam).expand(nq, H, 1)]
+            ks += [b[:, None, :3].expand(nk, H, 3), (b[:, :3] * b[:, :3]).sum(1)[:, None, None].expand(nk, H, 1)]
+        if self.gated:   # -(lambda_q + lambda_k) (za - zb)^2 without its terms of the query alone
+            za, lq, zb, lk = a[:, -2:-1], a[:, -1:], b[:, -2:-1], b[:, -1:]
+            cq = torch.cat([2 * lq * za, -lq, za * za, za, torch.ones_like(za)], 1)
+            ck = torch.cat([zb, zb * zb, -lk, 2 * lk * zb, -lk * zb * zb], 1)
+            qs.append(cq[:, None, :].expand(nq, H, 5))
+            ks.append(ck[:, None, :].expand(nk, H, 5))
+        extra = sum(t.shape[2] for t in qs)
+        wide = next(w for w in (8, 16, 32, 64, 128) if w >= d + extra)
         s = math.sqrt(wide)
-        lam = self.range[None, :, None]
-        qa = torch.cat([q * (s / math.sqrt(d)), (2 * s) * lam * a[:, None, :], (-s * lam).expand(nq, H, 1),
-                        q.new_zeros(nq, H, wide - d - 4)], 2)
-        ka = torch.cat([k, b[:, None, :].expand(nk, H, 3), (b * b).sum(1)[:, None, None].expand(nk, H, 1),
-                        k.new_zeros(nk, H, wide - d - 4)], 2)
+        qa = torch.cat([q * (s / math.sqrt(d)), *(t * s for t in qs), q.new_zeros(nq, H, wide - d - extra)], 2)
+        ka = torch.cat([k, *ks, k.new_zeros(nk, H, wide - d - extra)], 2)
         return qa, ka
 
     def _fused_forward(self, q_feat, k_feat, q_pixels, keys: Layout, values: torch.Tensor, guide=None
@@ -101,24 +147,24 @@ class Reconstruction(nn.Module):
 
     def __init__(self, dim: int, scales: int = 3, heads: int = 2, head_dim: int = 8, radius: float = 2.5,
                  radius_growth: float = 1.0, backend: str = "auto", lattice: bool = False, prior_range: bool = False,
-                 residual: bool = False):
+                 residual: bool = False, gated: bool = False):
         super().__init__()
         self.residual = None
         if residual:
             self.residual = nn.Sequential(nn.Linear(dim, dim), nn.ReLU(), nn.Linear(dim, 1))
             nn.init.zeros_(self.residual[2].weight)
             nn.init.zeros_(self.residual[2].bias)
-        self.scales, self.lattice = scales, lattice
+        self.scales, self.lattice, self.gated = scales, lattice, gated
         radii = [radius + radius_growth * s for s in range(scales)]
-        self.down = nn.ModuleList(KernelAttention(dim, heads, head_dim, radii[s], backend, prior_range)
+        self.down = nn.ModuleList(KernelAttention(dim, heads, head_dim, radii[s], backend, prior_range, gated)
                                   for s in range(scales - 1))
-        self.per_scale = nn.ModuleList(KernelAttention(dim, heads, head_dim, radii[s], backend, prior_range)
+        self.per_scale = nn.ModuleList(KernelAttention(dim, heads, head_dim, radii[s], backend, prior_range, gated)
                                        for s in range(scales))
         self.mixer = nn.Linear(dim, scales)
 
     def forward(self, feat: torch.Tensor, layout: Layout, noisy: torch.Tensor, guide=None) -> torch.Tensor:
         """feat [N, dim] backbone embeddings, noisy [N, C] layer values (any C: AOVs batch here) -> [N, C].
-        `guide`: (prior [N, 3], noisy flat [N, 3]) per bin, for prior-range modules (inputs.prior_guides)."""
+        `guide`: (a [N, *], b [N, *]) per bin, for prior-range or gated modules (KernelAttention.forward)."""
         feats, layouts, images = [feat], [layout], [noisy]
         guides = [guide]
         for s in range(self.scales - 1):  # stage 1: the pyramid of blurred layers
