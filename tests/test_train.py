@@ -385,7 +385,8 @@ def test_edit_loss_image_is_the_edit_eval_scores():
         layers, img, offsets = _random_layers(seed)
         (front, _), (back, _) = depth_slices(layers, layers, offsets)
         oracle = composite_edit(img, split_depth(img)).reshape(-1, 3)
-        assert np.allclose(edit_image(front, back).numpy(), oracle, rtol=1e-5, atol=1e-6)   # metrics flattens in float32
+        # metrics flattens in float32
+        assert np.allclose(edit_image(front, back).numpy(), oracle, rtol=1e-5, atol=1e-6)
         scaled = img.with_values(img.values * np.array([4, 4, 4, 1, 1]))
         big = {**layers, "diffuse": layers["diffuse"] * 4}
         (front4, _), (back4, _) = depth_slices(big, big, offsets)
@@ -540,12 +541,18 @@ def test_a_reconstruction_grown_by_a_scale_starts_from_the_init():
 
 def test_cross_frame_init_must_share_the_spatial_models_dropout(tmp_path):
     """A sequence config on the lattice bin dropout refuses a spatial init trained without it (the weights would
-    load, the U-Nets would see other bins than they were trained on): exit 2, no run folder."""
+    load, the U-Nets would see other bins than they were trained on), and one with the layer gate an init without
+    it: exit 2, no run folder."""
     ds = dataset_from_example(tmp_path / "ds")
     run = tmp_path / "run"
     r = CliRunner().invoke(cli, ["train", str(ds), "-o", str(run), "--steps", "1", "--crop", "16", "--config",
                                  "cpu-small-pdl-xg", "--init", "cpu-small-pd-v2", "--freeze-spatial"])
     assert r.exit_code == 2 and "dropout_lattice=False" in r.output, r.output
+    assert not run.exists()
+    # nor a spatial init without the layer gate the sequence config's spatial model has
+    r = CliRunner().invoke(cli, ["train", str(ds), "-o", str(run), "--steps", "1", "--crop", "16", "--config",
+                                 "cpu-small-pdl-gza-xg", "--init", "cpu-small-pdl-v1", "--freeze-spatial"])
+    assert r.exit_code == 2 and "layer_gate=()" in r.output, r.output
     assert not run.exists()
 
 

@@ -173,6 +173,10 @@ CONFIGS["cpu-small-pdl-gza"] = ModelConfig(**{**CONFIGS["cpu-small-pdl"].__dict_
 CONFIGS["cpu-small-pdl-gall"] = ModelConfig(**{**CONFIGS["cpu-small-pdl"].__dict__, "name": "cpu-small-pdl-gall",
                                               "layer_gate": ("diffuse", "specular", "alpha", "depth")})
 
+# the sequence model on cpu-small-pdl-gza: cpu-small-pdl-xg with the spatial model's layer gate
+CONFIGS["cpu-small-pdl-gza-xg"] = ModelConfig(**{**CONFIGS["cpu-small-pdl-xg"].__dict__, "name": "cpu-small-pdl-gza-xg",
+                                                "layer_gate": ("depth", "alpha")})
+
 
 def get_config(name: str) -> ModelConfig:
     try:

@@ -168,7 +168,7 @@ def build_model(cfg: TrainConfig, config):
         init = load_model(cfg.init).model
         if init.config.dim != config.dim or init.config.unets != config.unets:
             raise RanadError(f"--init model {init.config.name!r} does not match config {config.name!r}", cfg.init)
-        for flag in ("dropout_lattice", "demodulate"):   # the spatial model's behaviour, not in its weights' shapes
+        for flag in ("dropout_lattice", "demodulate", "layer_gate"):   # behaviour, not in the weights' shapes
             if getattr(init.config, flag) != getattr(config, flag):
                 raise RanadError(f"--init model {init.config.name!r} has {flag}={getattr(init.config, flag)}, "
                                  f"config {config.name!r} {getattr(config, flag)}", cfg.init)
