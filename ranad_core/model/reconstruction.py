@@ -12,7 +12,7 @@ guide, inputs.modulation) before the kernels and the result multiplied by the qu
 values (the same operator denoises AOVs, and light groups still sum to the beauty), but no longer a convex
 combination of them.
 
-Layer gate (configs with `layer_gate`, `layer_gate`): the kernels of a gated layer keep to the bins' own depth
+Layer gate (configs with `layer_gate`; the guides: `layer_gate`): the kernels of a gated layer keep to the bins' own depth
 layers, a range term -(lambda_q + lambda_k) (log z_q - log z_k)^2, each lambda set by half that bin's depth gap to
 the nearest other bin of its pixel (0 in single-bin pixels): a query of a layer stack reads only its own layer, and
 no query reads a key of a stack across that key's layers (the pyramid's blurred keys stay on their layers too).
@@ -77,7 +77,7 @@ class KernelAttention(nn.Module):
     def forward(self, q_feat, k_feat, q_pixels, keys: Layout, values: torch.Tensor, guide=None) -> torch.Tensor:
         """values [Nk, C] -> [Nq, C]: each head's kernel applied to all C value channels, heads mixed convexly.
         `guide`: (a [Nq, *], b [Nk, *]): for a prior-range module first the query's flat prior and the key's noisy
-        flat (3 columns each), then for a gated one layer_gate's (a: 2 columns, b: 1)."""
+        flat (3 columns each), then for a gated one layer_gate's (2 columns each)."""
         H, d = self.heads, self.head_dim
         if fused.active(q_feat, self.backend):
             return self._fused_forward(q_feat, k_feat, q_pixels, keys, values, guide)
