@@ -61,7 +61,7 @@ def parse_bytes(text: str) -> float:
 @click.option("--keep-depth", is_flag=True,
               help="Write the input's depths (Z, ZBack) unchanged instead of denoised ones. The default model's "
                    "per-bin depth error is 0.66-0.89x the noisy input's on its held-out and in-family sets; "
-                   "models without the layer gate (cpu-small-pdl-v1 and older) were up to 2.6x worse than the "
+                   "models without the layer gate (cpu-small-pdl-v1 and older) were up to 3x worse than the "
                    "noisy input on layered scenes (model cards).")
 @click.option("--tile", type=click.IntRange(16), default=None,
               help="Tile size in pixels (default: the tiling that fits --max-memory with the fewest bins "
