@@ -102,22 +102,29 @@ class KernelAttention(nn.Module):
             raise ValueError("a prior-range or gated reconstruction needs its guides (prior features, depths)")
         a, b = guide
         nq, nk, H, d = q.shape[0], k.shape[0], self.heads, self.head_dim
-        qs, ks = [], []
+        qs, ks = [], []   # [N, H or 1, c] blocks of columns, written once into the wide operands below
         if self.range is not None:
             lam = self.range[None, :, None]
-            qs += [2 * lam * a[:, None, :3], (-lam).expand(nq, H, 1)]
-            ks += [b[:, None, :3].expand(nk, H, 3), (b[:, :3] * b[:, :3]).sum(1)[:, None, None].expand(nk, H, 1)]
+            qs += [2 * lam * a[:, None, :3], (-lam).expand(1, H, 1)]
+            ks += [b[:, None, :3], (b[:, :3] * b[:, :3]).sum(1)[:, None, None]]
         if self.gated:   # -(lambda_q + lambda_k) (za - zb)^2 without its terms of the query alone
             za, lq, zb, lk = a[:, -2:-1], a[:, -1:], b[:, -2:-1], b[:, -1:]
-            cq = torch.cat([2 * lq * za, -lq, za * za, za, torch.ones_like(za)], 1)
-            ck = torch.cat([zb, zb * zb, -lk, 2 * lk * zb, -lk * zb * zb], 1)
-            qs.append(cq[:, None, :].expand(nq, H, 5))
-            ks.append(ck[:, None, :].expand(nk, H, 5))
+            qs.append(torch.cat([2 * lq * za, -lq, za * za, za, torch.ones_like(za)], 1)[:, None, :])
+            ks.append(torch.cat([zb, zb * zb, -lk, 2 * lk * zb, -lk * zb * zb], 1)[:, None, :])
         extra = sum(t.shape[2] for t in qs)
         wide = next(w for w in (8, 16, 32, 64, 128) if w >= d + extra)
         s = math.sqrt(wide)
-        qa = torch.cat([q * (s / math.sqrt(d)), *(t * s for t in qs), q.new_zeros(nq, H, wide - d - extra)], 2)
-        ka = torch.cat([k, *ks, k.new_zeros(nk, H, wide - d - extra)], 2)
+        qa, ka = q.new_empty(nq, H, wide), k.new_empty(nk, H, wide)
+        qa[..., :d] = q * (s / math.sqrt(d))
+        ka[..., :d] = k
+        at = d
+        for tq, tk in zip(qs, ks):
+            c = tq.shape[2]
+            qa[..., at:at + c] = tq * s
+            ka[..., at:at + c] = tk
+            at += c
+        qa[..., at:] = 0
+        ka[..., at:] = 0
         return qa, ka
 
     def _fused_forward(self, q_feat, k_feat, q_pixels, keys: Layout, values: torch.Tensor, guide=None
