@@ -142,6 +142,25 @@ def test_aov_command_through_the_cache_of_a_guarded_matching_model(tmp_path):
     denoise_then_aov(models()["guarded-matching"], tmp_path)
 
 
+@pytest.mark.parametrize("cross", [False, True])
+def test_aov_command_through_the_cache_of_a_colour_gated_model(tmp_path, cross):
+    """A model whose colour kernels are layer-gated (reconstruction.layer_gate) reads the bins' depths in `ranad
+    aov` as in the primary pass, single-frame and cross-frame: the light groups still sum to the denoised beauty."""
+    import dataclasses
+
+    torch.manual_seed(1)
+    gated = ("diffuse", "specular", "alpha", "depth")
+    if cross:
+        cfg = dataclasses.replace(demodulating(input_keys_config()), name="gated-keys", layer_gate=gated)
+        net = CrossFrameRaNAD(cfg, feature_dim()).eval()
+        for g in net.temporal_gate.values():
+            torch.nn.init.constant_(g.bias, 0.0)
+    else:
+        net = RaNAD(get_config("cpu-small-pdl-gall"), feature_dim("prior")).eval()
+    assert net.config.layer_gate == gated
+    denoise_then_aov(net, tmp_path)
+
+
 def test_aov_command_through_the_cache_of_a_prior_range_model(tmp_path):
     """The prior-range reconstruction: the prior guides travel in the cached embeddings, so `ranad aov` gives the
     kernels the same range term and the light groups still sum to the denoised beauty."""
