@@ -12,11 +12,12 @@ guide, inputs.modulation) before the kernels and the result multiplied by the qu
 values (the same operator denoises AOVs, and light groups still sum to the beauty), but no longer a convex
 combination of them.
 
-Layer gate (configs with `layer_gate`; the guides: `layer_gate`): the kernels of a gated layer keep to the bins' own depth
-layers, a range term -(lambda_q + lambda_k) (log z_q - log z_k)^2, each lambda set by half that bin's depth gap to
-the nearest other bin of its pixel (0 in single-bin pixels): a query of a layer stack reads only its own layer, and
-no query reads a key of a stack across that key's layers (the pyramid's blurred keys stay on their layers too).
-It only reweights, so the output stays a combination of the noisy values.
+Layer gate (configs with `layer_gate`; its guides come from the function `layer_gate`): the kernels of a gated
+layer keep to the bins' own depth layers, a range term -(lambda_q + lambda_k) (log z_q - log z_k)^2, each lambda
+set by half that bin's depth gap to the nearest other bin of its pixel (0 in single-bin pixels): a query of a
+layer stack reads only its own layer, and no query reads a key of a stack across that key's layers (the
+pyramid's blurred keys stay on their layers too). It only reweights, so the output stays a combination of the
+noisy values.
 """
 
 from __future__ import annotations
