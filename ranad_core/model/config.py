@@ -54,9 +54,9 @@ class ModelConfig:
     # zero at start: deep-Z bins made of few samples carry an alpha biased high behind the first bin (a bin exists
     # only where a sample stopped), shared by all neighbours, so no kernel removes it (runs/edit-oracles-s12)
     alpha_residual: bool = False
-    # output layers whose reconstruction kernels keep to the query bin's own depth layer (reconstruction.layer_gate):
-    # in a pixel with several bins, a key bin whose depth is nearer another bin of the query's pixel than the query
-    # bin itself weighs next to nothing. Parameter-free; single-bin pixels are untouched. Stacks of parallel
+    # output layers whose reconstruction kernels keep to the bins' own depth layers (reconstruction.layer_gate): a
+    # query bin of a pixel with several bins reads only keys near its depth, and a key bin of such a pixel is read
+    # only by queries near its depth. Parameter-free; images of single-bin pixels are untouched. Stacks of parallel
     # semi-transparent layers, a family no training set held, got depths 2-5x worse than the noisy input's without it
     layer_gate: tuple = ()
 
