@@ -101,7 +101,7 @@ def denoise_aovs(model, images: list, centre: int, mapping: ChannelMap, layers: 
     moved, _ = compensate(images, centre, flows, mapping.motion) if len(images) > 1 else (images, 0)
     h, w = images[centre].height, images[centre].width
     gated = bool((model.single if cross else model).config.layer_gate)
-    vals, window, depths = [], [], []
+    vals, window = [], []
     for k, img in enumerate(moved):
         srt, srt_perm = canonical(img, mapping)[0].sorted()
         if len(srt_perm) != len(perms[k]) or not np.array_equal(srt_perm, perms[k]):
@@ -109,12 +109,10 @@ def denoise_aovs(model, images: list, centre: int, mapping: ChannelMap, layers: 
         vals.append({name: t.to(dev) for name, t in _values(img, mapping, layers, perms[k]).items()})
         layout = Layout.of(torch.as_tensor(offsets[k]), h, w)
         mod = modulation(srt)   # what the primary pass demodulated the diffuse layer by (demodulating models)
-        dk = {}   # a layer-gated model's kernels read the bins' depths (reconstruction.layer_gate), as they did
+        depth = None   # a layer-gated model's kernels read the bins' depths (reconstruction.layer_gate), as they did
         if gated:
-            z = replace_nonfinite(srt, DEPTHS)[0].channel(DEPTH)[:, None].astype(np.float32)
-            dk = {"depth": torch.from_numpy(z).to(dev)}
-        depths.append(dk)
-        window.append(ModelInputs(layout, None, dict(dk), None if mod is None else torch.from_numpy(mod)).to(dev))
+            depth = torch.from_numpy(replace_nonfinite(srt, DEPTHS)[0].channel(DEPTH)[:, None].astype(np.float32))
+        window.append(ModelInputs(layout, None, {}, None if mod is None else torch.from_numpy(mod), depth).to(dev))
     feats = [torch.from_numpy(np.asarray(e, np.float16)).float().to(dev) for e in embeddings]
     total = vals[centre]["diffuse"].shape[1]
     denoised = {"diffuse": [], "specular": []}
@@ -126,8 +124,8 @@ def denoise_aovs(model, images: list, centre: int, mapping: ChannelMap, layers: 
                     denoised[name].append(vals[centre][name][:, a:b])   # a model without that layer: as is
                     continue
                 if cross:
-                    for inp, v, dk in zip(window, vals, depths):
-                        inp.layers = {name: v[name][:, a:b], **dk}
+                    for inp, v in zip(window, vals):
+                        inp.layers = {name: v[name][:, a:b]}
                     res = model.reconstruct(feats, window, centre)[name]
                 else:
                     res = model.reconstruct_layer(name, feats[0], window[0], vals[0][name][:, a:b])

@@ -346,6 +346,9 @@ def _denoise_window(model, images, centre, mapping, tile, halo, keep_noisy, want
                 parts = [_tile_inputs(fr, win, w) for fr in frames]
             if parts[centre][1].size:
                 window = [p[0].to(device) for p in parts]
+                if keep_depth:   # the depth layer is not reconstructed (nor written back); the gate keeps its depths
+                    for inp in window:
+                        inp.layers.pop("depth", None)
                 with torch.inference_mode():
                     # embeddings are rounded to float16, the precision of the AOV cache, before the
                     # reconstruction, so `ranad aov` rebuilds exactly these kernels and light groups sum to this
@@ -360,8 +363,6 @@ def _denoise_window(model, images, centre, mapping, tile, halo, keep_noisy, want
                             pred = model.reconstruct(feats, window, centre)
                         else:
                             pred = model.reconstruct(feats[0], window[0])
-                    if keep_depth:   # not written back; the inputs keep their depths for the layer gate
-                        pred.pop("depth", None)
                 with stage("tiles/scatter"):
                     keep = _core_mask(parts[centre][2], win, core)
                     dst = parts[centre][1][keep]

@@ -44,6 +44,9 @@ class ModelInputs:
     # [N, 3] albedo + DEMOD_FLOOR where the image has albedo and the diffuse/specular split, else None: what a
     # demodulating model divides the diffuse layer by (modulation())
     modulation: torch.Tensor | None = None
+    # [N, 1] the bins' depths, what a layer-gated reconstruction reads (reconstruction.layer_gate); kept apart from
+    # `layers` so that callers that do not denoise the depth layer (--keep-depth, the AOV pass) still give them
+    depth: torch.Tensor | None = None
 
     @property
     def feature_dim(self) -> int:
@@ -53,7 +56,8 @@ class ModelInputs:
         """These inputs on `device` (tiles are prepared on the CPU and moved to the model's device)."""
         return ModelInputs(self.layout.to(device), None if self.features is None else self.features.to(device),
                            {k: v.to(device) for k, v in self.layers.items()},
-                           None if self.modulation is None else self.modulation.to(device))
+                           None if self.modulation is None else self.modulation.to(device),
+                           None if self.depth is None else self.depth.to(device))
 
 
 FEATURE_SETS = ("log1p", "prior")
@@ -170,5 +174,5 @@ def prepare(img: DeepImage, z_stats: tuple[float, float] | None = None, features
     feats = torch.cat([torch.from_numpy(base), torch.stack(pos, 1), torch.stack(bins, 1),
                        (b / nb.clamp(min=1)).unsqueeze(1)], dim=1)
     mod = modulation(img)
-    return ModelInputs(layout, feats, {k: torch.from_numpy(v) for k, v in layers.items()},
-                       None if mod is None else torch.from_numpy(mod))
+    tensors = {k: torch.from_numpy(v) for k, v in layers.items()}
+    return ModelInputs(layout, feats, tensors, None if mod is None else torch.from_numpy(mod), tensors["depth"])

@@ -84,7 +84,7 @@ def with_layer_gate(rec: Reconstruction, guide, inputs: ModelInputs):
     inputs' depths): what Reconstruction.forward takes."""
     if not rec.gated:
         return guide
-    if "depth" not in inputs.layers:
-        raise ValueError("a gated reconstruction needs the bins' depths (the inputs' depth layer)")
-    a, b = layer_gate(inputs.layers["depth"], inputs.layout)
+    if inputs.depth is None:
+        raise ValueError("a gated reconstruction needs the bins' depths (ModelInputs.depth)")
+    a, b = layer_gate(inputs.depth, inputs.layout)
     return (a, b) if guide is None else (torch.cat([guide[0], a], 1), torch.cat([guide[1], b], 1))
