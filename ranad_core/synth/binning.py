@@ -4,7 +4,8 @@ Rules (documented in README, "Synthetic data"):
 
 * deep-OID: one bin per (pixel, object id) of the samples' first stops; the id goes to the uint32 `id` channel.
 * deep-Z: a pixel's samples are sorted by view depth and a new bin starts wherever consecutive depths differ by
-  more than 3% plus 1 cm (Z_GAP_REL, Z_GAP_ABS); no id channel.
+  more than 3% plus 1 cm (Z_GAP_REL, Z_GAP_ABS; `gap_rel` overrides the 3%: a small one splits a surface into
+  many thin bins, as renderers that merge less do); no id channel.
 * Per bin: the mean of every attribute (albedo, normal, position, motion), `coverage` = samples in the bin / spp,
   Z = ZBack = the mean depth (surfaces are points, not volumes), and radiance-like channels as sums / spp.
 * EXR alpha: bins are ordered front to back and bin i gets A_i = c_i / (1 - sum_{j<i} c_j) with its colours
@@ -46,8 +47,10 @@ class BinLayout:
         return np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
 
 
-def layout_from_samples(s: dict, width: int, height: int, kind: str) -> tuple[BinLayout, np.ndarray]:
-    """The bins of the noisy samples and each sample's bin (-1 for samples that hit nothing)."""
+def layout_from_samples(s: dict, width: int, height: int, kind: str,
+                        gap_rel: float = Z_GAP_REL) -> tuple[BinLayout, np.ndarray]:
+    """The bins of the noisy samples and each sample's bin (-1 for samples that hit nothing). `gap_rel`: the
+    deep-Z split rule's relative depth gap (the absolute 1 cm applies only with the default gap)."""
     hit = np.flatnonzero(s["hit"])
     pix, z, obj = s["pixel"][hit], s["z"][hit], s["obj"][hit]
     if kind == "oid":
@@ -58,7 +61,8 @@ def layout_from_samples(s: dict, width: int, height: int, kind: str) -> tuple[Bi
         order = np.lexsort((z, pix))
         zs = z[order]
         key_change = np.ones(len(order), bool)
-        key_change[1:] = (pix[order][1:] != pix[order][:-1]) | (zs[1:] > zs[:-1] * (1 + Z_GAP_REL) + Z_GAP_ABS)
+        gap_abs = Z_GAP_ABS if gap_rel == Z_GAP_REL else 0.0
+        key_change[1:] = (pix[order][1:] != pix[order][:-1]) | (zs[1:] > zs[:-1] * (1 + gap_rel) + gap_abs)
     else:
         raise ValueError(f"unknown deep kind {kind!r}")
     bin_sorted = np.cumsum(key_change) - 1

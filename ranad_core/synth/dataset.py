@@ -20,6 +20,7 @@ import numpy as np
 
 from ..exr import write_deep
 from ..fileutil import atomic_output
+from .binning import Z_GAP_REL
 from .scene import PRESETS, make_scene
 from .trace import load_frame
 
@@ -39,6 +40,7 @@ class SynthConfig:
     kinds: tuple = ("deepz", "deepoid")
     ref_frames: str = "centre"        # "centre", or "all" (references for every frame: temporal evaluation)
     motion: float = 1.0               # per-frame motion scale (scene.make_scene): 0.5 = twice the frame rate
+    bin_gap: float = Z_GAP_REL        # deep-Z split rule's relative depth gap (binning.layout_from_samples)
 
 
 def scene_seed(seed: int, index: int) -> int:
@@ -91,7 +93,7 @@ def make_one(cfg: SynthConfig, index: int) -> dict:
         for spp in cfg.spp:
             samples = noisy_samples(spec, frame, spp, sseed + 7919 * frame + spp, fs)
             for kind_name in cfg.kinds:
-                img, lay = bin_noisy(spec, samples, spp, KINDS[kind_name])
+                img, lay = bin_noisy(spec, samples, spp, KINDS[kind_name], cfg.bin_gap)
                 path = os.path.join(root, kind_name, f"noisy_spp{spp}.{frame:04d}.exr")
                 write_deep(path, img)
                 files.append(os.path.relpath(path, root))
@@ -114,7 +116,7 @@ def make_one(cfg: SynthConfig, index: int) -> dict:
         stats[kind_name]["bins_per_covered_pixel"] = float(np.mean(bins_per_px[kind_name]))
     manifest = {"scene": index, "seed": sseed, "preset": preset, "size": cfg.size, "frames": cfg.frames,
                 "motion": cfg.motion, "centre_frame": centre, "reference_frames": ref_frames, "spp": list(cfg.spp),
-                "ref_spp": cfg.ref_spp,
+                "ref_spp": cfg.ref_spp, **({"bin_gap": cfg.bin_gap} if cfg.bin_gap != Z_GAP_REL else {}),
                 "light_groups": spec.light_groups, "objects": len(spec.objects), "files": files, "stats": stats,
                 "seconds": round(time.perf_counter() - t0, 2)}
     with atomic_output(os.path.join(root, "manifest.json")) as tmp:

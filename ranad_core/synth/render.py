@@ -15,7 +15,7 @@ import math
 import numpy as np
 
 from ..deep import DeepImage
-from .binning import BinLayout, accumulate, assign_to_layout, bin_values, layout_from_samples
+from .binning import Z_GAP_REL, BinLayout, accumulate, assign_to_layout, bin_values, layout_from_samples
 from .scene import SceneSpec, look_at
 from .trace import REFERENCE_FIELDS, load_frame, trace
 
@@ -108,9 +108,10 @@ def noisy_samples(spec: SceneSpec, frame: int, spp: int, seed: int, fs=None) -> 
     return s
 
 
-def bin_noisy(spec: SceneSpec, s: dict, spp: int, kind: str):
-    """(DeepImage, layout) of noisy samples as a deep-Z ("z") or deep-OID ("oid") image."""
-    lay, sample_bin = layout_from_samples(s, spec.width, spec.height, kind)
+def bin_noisy(spec: SceneSpec, s: dict, spp: int, kind: str, gap_rel: float = Z_GAP_REL):
+    """(DeepImage, layout) of noisy samples as a deep-Z ("z") or deep-OID ("oid") image (`gap_rel`: the deep-Z
+    split rule, binning.layout_from_samples)."""
+    lay, sample_bin = layout_from_samples(s, spec.width, spec.height, kind, gap_rel)
     vals = bin_values(accumulate(s, sample_bin, len(lay.pixel)), lay, spp)
     return deep_image(spec, lay, vals, True), lay
 
