@@ -87,12 +87,17 @@ def _values(img: DeepImage, m: ChannelMap, layers: dict, perm: np.ndarray) -> di
 
 
 def denoise_aovs(model, images: list, centre: int, mapping: ChannelMap, layers: dict, embeddings: list,
-                 perms: list, offsets: list, flows: list | None = None) -> dict:
+                 perms: list, offsets: list, flows: list | None = None, merge_gap: float = 0.0,
+                 merges: list | None = None, split: np.ndarray | None = None) -> dict:
     """Denoised AOV layers of frame `centre`: layer -> [N, 3] in the file's bin order.
 
     images: the window's frames holding the beauty channels the mapping names and the AOV channels, not yet
     motion-compensated; embeddings/perms/offsets: per window frame, as the primary pass made them (the cache);
-    flows: the per-pixel flows the primary pass used, if any."""
+    flows: the per-pixel flows the primary pass used, if any; merge_gap/merges/split: the thin bins the primary
+    pass merged (binmerge: its gap, per frame the group of each sorted bin or None, the centre's share-back
+    factors): the AOVs are merged and shared back the same way."""
+    from . import binmerge
+    from .denoise import merged_groups
     from .denoise import is_cross_frame
     from .motion import compensate
 
@@ -101,12 +106,25 @@ def denoise_aovs(model, images: list, centre: int, mapping: ChannelMap, layers: 
     moved, _ = compensate(images, centre, flows, mapping.motion) if len(images) > 1 else (images, 0)
     h, w = images[centre].height, images[centre].width
     gated = bool((model.single if cross else model).config.layer_gate)
-    vals, window = [], []
+    vals, window, centre_groups = [], [], None
     for k, img in enumerate(moved):
         srt, srt_perm = canonical(img, mapping)[0].sorted()
         if len(srt_perm) != len(perms[k]) or not np.array_equal(srt_perm, perms[k]):
             raise RanadError("the AOV frames do not match the cached bin layout (another render?)", None)
-        vals.append({name: t.to(dev) for name, t in _values(img, mapping, layers, perms[k]).items()})
+        vals.append(_values(img, mapping, layers, perms[k]))
+        cached = merges[k] if merges else None
+        groups = None
+        if cached is not None:   # the groups of the primary pass, which merged after its NaN/Inf policy
+            groups = merged_groups(replace_nonfinite(srt, DEPTHS)[0], img, srt_perm, merge_gap)
+        if (groups is None) != (cached is None) or (groups is not None and not np.array_equal(groups.index, cached)):
+            raise RanadError("the AOV frames do not match the cached bin merges (another render?)", None)
+        if groups is not None:
+            srt = binmerge.merge(srt, groups)
+            vals[-1] = {name: torch.from_numpy(binmerge.merge_values(t.numpy(), groups, "composite")
+                                               .astype(np.float32)) for name, t in vals[-1].items()}
+            if k == centre:
+                centre_groups = groups
+        vals[-1] = {name: t.to(dev) for name, t in vals[-1].items()}
         layout = Layout.of(torch.as_tensor(offsets[k]), h, w)
         mod = modulation(srt)   # what the primary pass demodulated the diffuse layer by (demodulating models)
         depth = None   # a layer-gated model's kernels read the bins' depths (reconstruction.layer_gate), as they did
@@ -131,7 +149,10 @@ def denoise_aovs(model, images: list, centre: int, mapping: ChannelMap, layers: 
                     res = model.reconstruct_layer(name, feats[0], window[0], vals[0][name][:, a:b])
                 denoised[name].append(res)
     total_out = (torch.cat(denoised["diffuse"], 1) + torch.cat(denoised["specular"], 1) + vals[centre]["pass"])
-    out = unsort(total_out.cpu().numpy(), perms[centre])
+    out = total_out.cpu().numpy()
+    if centre_groups is not None:
+        out = binmerge.split(out, centre_groups, np.asarray(split))
+    out = unsort(out, perms[centre])
     return {layer: out[:, 3 * i:3 * i + 3] for i, layer in enumerate(layers)}
 
 
@@ -169,9 +190,12 @@ def denoise_cached_frame(loaded, cache_path: str, tensors: dict, meta: dict, pat
         combined.append(base.with_values(np.concatenate([base.values, cols], 1), keep + names))
     mapping = detect(beauty[centre], json.loads(meta.get("overrides", "{}")), window[centre])
     k = len(window)
+    merges = [tensors.get(f"merge.{i}") for i in range(k)]
     result = denoise_aovs(loaded.model, combined, centre, mapping, layers,
                           [tensors[f"embeddings.{i}"] for i in range(k)],
-                          [tensors[f"perm.{i}"] for i in range(k)], [tensors[f"offsets.{i}"] for i in range(k)])
+                          [tensors[f"perm.{i}"] for i in range(k)], [tensors[f"offsets.{i}"] for i in range(k)],
+                          None, float(meta.get("merge_gap", "0")), merges if any(x is not None for x in merges)
+                          else None, tensors.get("split"))
     target = replace_nonfinite(aov_imgs[centre], mapping.depth_channels())[0]   # the one NaN/Inf policy
     vals = target.values.copy()
     for layer, chans in layers.items():

@@ -8,13 +8,16 @@ to rerun on other values:
   motion-compensated onto the centre frame; for input-keyed cross-frame models the temporal keys, and for the
   centre [N, 2 dim]: its backbone output, then its keys), `perm.k` int64 [N_k] (sorted row i is row perm[i] of the
   compensated frame; for the centre frame, of the file), `offsets.k` int64 [H*W+1], `z_stats` float64 [K, 2]
-  (the depth standardisation used per frame);
+  (the depth standardisation used per frame); where thin bins were merged (binmerge), `merge.k` int64 [N_k] (each
+  sorted bin's merged bin; embeddings and offsets are then the merged bins') and `split` float32 [N] (the
+  centre's share-back factors);
 - metadata (strings): `format` ("ranad-cache/1"), `model_id` (name@sha256 prefix of the weights), `model`
   (what --model resolved to), `input` (absolute path of the denoised file), `window` (JSON list of the
   window's input paths), `centre` (index of the denoised frame in it), `frame`, `layout_sha` (fingerprint
   of the centre's bin layout and depths: SHA-256 of offsets and Z), `mapping` (JSON of the channel map),
   `overrides` (JSON of the --map overrides, so `ranad aov` maps the channels the same way), `tile`, `halo`,
-  `part` (the part of a multi-part file, by name or index; empty for single-part files).
+  `part` (the part of a multi-part file, by name or index; empty for single-part files), `merge_gap` (the
+  binmerge gap, "0" when nothing merged).
 
 A cache is refused when its format, model id or layout fingerprint does not match what it is used with.
 """
@@ -66,12 +69,18 @@ def write_cache(path: str, img: DeepImage, result, model_id: str, model_spec: st
         tensors[f"embeddings.{k}"] = np.ascontiguousarray(emb, np.float16)
         tensors[f"perm.{k}"] = np.ascontiguousarray(perm, np.int64)
         tensors[f"offsets.{k}"] = np.ascontiguousarray(offs, np.int64)
+    for k, index in enumerate(result.merges or []):
+        if index is not None:
+            tensors[f"merge.{k}"] = np.ascontiguousarray(index, np.int64)
+    if result.merges:
+        tensors["split"] = np.ascontiguousarray(result.split, np.float32)
     window = [os.path.abspath(p) for p in (window_paths or [input_path])]
     meta = {"format": FORMAT, "model_id": model_id, "model": model_spec, "input": os.path.abspath(input_path),
             "window": json.dumps(window), "centre": str(result.centre),
             "frame": "" if frame is None else str(frame), "layout_sha": layout_fingerprint(img),
             "mapping": json.dumps(result.mapping.describe()), "overrides": json.dumps(overrides or {}),
-            "tile": str(tile), "halo": str(halo), "part": part or ""}
+            "tile": str(tile), "halo": str(halo), "part": part or "",
+            "merge_gap": repr(float(result.merge_gap)) if result.merges else "0"}
     with atomic_output(path) as tmp:
         save_file(tensors, tmp, metadata=meta)
 

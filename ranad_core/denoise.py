@@ -25,7 +25,9 @@ from dataclasses import dataclass, field
 import numpy as np
 import torch
 
-from .channels import (DEPTH, DEPTH_BACK, DEPTHS, FLAT_NOISY, PRIOR, ChannelMap, canonical, detect, layer_values,
+from . import binmerge
+from .binmerge import Groups
+from .channels import (ALPHA, DEPTH, DEPTH_BACK, DEPTHS, FLAT_NOISY, PRIOR, ChannelMap, canonical, detect, layer_values,
                        split_layer)
 from .deep import DeepImage, replace_nonfinite, unsort
 from .model.inputs import depth_stats, prepare
@@ -47,6 +49,9 @@ class FrameResult:
     offsets: list = field(default_factory=list)   # per window frame: offsets of its compensated bins
     mapping: ChannelMap | None = None
     dropped: int = 0                     # neighbour bins that motion carried out of the frame
+    merges: list | None = None           # per window frame: binmerge group of each sorted bin, or None (no merge)
+    split: np.ndarray | None = None      # the centre's binmerge.split_factors (None: nothing merged)
+    merge_gap: float = 0.0               # the binmerge gap the frames were merged with
 
     @property
     def perm(self):
@@ -205,16 +210,18 @@ class _Frame:
     nonfinite: int
     features: str = "log1p"
     scale: float = 1.0
+    groups: Groups | None = None   # thin bins merged into one (binmerge); srt and residual hold the merged bins
 
 
 def model_features(model) -> str:
     return getattr(model.config, "features", "log1p")
 
 
-def _model_frame(img: DeepImage, mapping: ChannelMap, features: str = "log1p", prior: "FramePrior | None" = None
-                 ) -> _Frame:
+def _model_frame(img: DeepImage, mapping: ChannelMap, features: str = "log1p", prior: "FramePrior | None" = None,
+                 merge_gap: float | None = None) -> _Frame:
     """`prior`: the frame's flat prior made before motion compensation, whose channels `img` carries (a moved
-    neighbour, see denoise_window); None: made here, on `img` as it is."""
+    neighbour, see denoise_window); None: made here, on `img` as it is. `merge_gap`: binmerge's gap (None: its
+    default; 0: no merging)."""
     canon, residual = canonical(img, mapping)
     canon, nonfinite = _fix_nonfinite(canon)
     if residual is not None:
@@ -222,6 +229,11 @@ def _model_frame(img: DeepImage, mapping: ChannelMap, features: str = "log1p", p
     with stage("inputs/sort and prior"):
         srt, perm = canon.sorted()
         res = residual[perm] if residual is not None else None
+        groups = merged_groups(srt, img, perm, merge_gap)
+        if groups is not None:
+            srt = binmerge.merge(srt, groups)
+            if res is not None:
+                res = binmerge.merge_values(res, groups, "composite").astype(np.float32)
         scale = 1.0
         if features == "prior" and prior is not None:
             scale = prior.scale
@@ -230,7 +242,14 @@ def _model_frame(img: DeepImage, mapping: ChannelMap, features: str = "log1p", p
 
             srt = with_prior(srt, res, presorted=True)
             scale = frame_scale(srt)
-    return _Frame(srt, perm, res, depth_stats(srt), nonfinite, features, scale)
+    return _Frame(srt, perm, res, depth_stats(srt), nonfinite, features, scale, groups)
+
+
+def merged_groups(srt: DeepImage, img: DeepImage, perm: np.ndarray, merge_gap: float | None) -> Groups | None:
+    """binmerge's groups of the sorted canonical `srt` of `img` (whose object ids keep different objects apart),
+    None when nothing merges."""
+    gap = binmerge.MERGE_GAP if merge_gap is None else merge_gap
+    return binmerge.find_groups(srt, {k: np.asarray(v)[perm] for k, v in img.ids.items()}, gap)
 
 
 @dataclass
@@ -243,7 +262,7 @@ class FramePrior:
 
     @classmethod
     def of(cls, img: DeepImage, mapping: ChannelMap) -> "FramePrior":
-        fr = _model_frame(img, mapping, "prior")
+        fr = _model_frame(img, mapping, "prior", merge_gap=0.0)   # per-pixel values: merging changes nothing
         cols = np.stack([fr.srt.channel(c) for c in (*PRIOR, *FLAT_NOISY)], 1)
         return cls(unsort(cols, fr.perm), fr.scale)
 
@@ -280,7 +299,7 @@ def denoise_frame(model, img: DeepImage, mapping: ChannelMap | None = None, tile
 def denoise_window(model, images: list, centre: int, mapping: ChannelMap | None = None, tile: int | None = None,
                    halo: int | None = None, keep_noisy: str | None = None, want_embeddings: bool = False,
                    progress=None, flows: list | None = None, priors: list | None = None,
-                   keep_depth: bool = False) -> FrameResult:
+                   keep_depth: bool = False, merge_gap: float | None = None) -> FrameResult:
     """Denoise frame `centre` of `images` (a window of consecutive frames; neighbours are motion-compensated onto
     it, in display coordinates where their data windows differ). `tile`: tile size in pixels (None: the whole
     frame); `halo`: None for the model's receptive field; `keep_noisy`: a prefix under which the noisy versions
@@ -290,7 +309,8 @@ def denoise_window(model, images: list, centre: int, mapping: ChannelMap | None 
     A cross-frame model on the flat prior gets every frame's prior made on that frame before compensation and
     carried with its bins (FramePrior); `priors`: per window frame, its FramePrior or None, a list the caller
     keeps across the windows of a shot (shot.py) and this fills in where None. `keep_depth`: the depth layer is
-    not reconstructed and the file's depths are written as they are.
+    not reconstructed and the file's depths are written as they are. `merge_gap`: thin bins of one surface within
+    this relative depth gap are denoised as one and shared back (binmerge; None: its default, 0: off).
 
     Tiles run where the model is (`model.to("cuda")`: `ranad denoise --device cuda`), and so does the flat prior's
     OIDN; inputs are prepared and outputs assembled on the CPU."""
@@ -299,11 +319,12 @@ def denoise_window(model, images: list, centre: int, mapping: ChannelMap | None 
     device = next(model.parameters()).device
     with oidn_on(device.type):
         return _denoise_window(model, images, centre, mapping, tile, halo, keep_noisy, want_embeddings, progress,
-                               flows, priors, keep_depth, device)
+                               flows, priors, keep_depth, device,
+                               binmerge.MERGE_GAP if merge_gap is None else float(merge_gap))
 
 
 def _denoise_window(model, images, centre, mapping, tile, halo, keep_noisy, want_embeddings, progress, flows,
-                    priors, keep_depth, device) -> FrameResult:
+                    priors, keep_depth, device, merge_gap) -> FrameResult:
     from .motion import compensate
 
     cross = is_cross_frame(model)
@@ -329,7 +350,10 @@ def _denoise_window(model, images, centre, mapping, tile, halo, keep_noisy, want
     else:
         moved, dropped = images, 0
     with stage("inputs"):
-        frames = [_model_frame(m, mapping, features, p) for m, p in zip(moved, carried)]
+        # thin bins are merged in the centre only: a neighbour's moved bins are what the cross-frame models trained
+        # on (several source bins of one object may land in a pixel at nearly one depth), merged or not
+        frames = [_model_frame(m, mapping, features, p, merge_gap if i == centre else 0.0)
+                  for i, (m, p) in enumerate(zip(moved, carried))]
     c = frames[centre]
     n = c.srt.num_bins
     h, w = c.srt.height, c.srt.width
@@ -380,20 +404,27 @@ def _denoise_window(model, images, centre, mapping, tile, halo, keep_noisy, want
         if progress:
             progress(1)
     with stage("assemble"):
-        out = _assemble(img, mapping, c.srt, c.perm, outs, keep_noisy) if n else img
+        factors = None
+        if c.groups is not None and n:
+            alpha = outs["alpha"] if "alpha" in outs else c.srt.channel(ALPHA)
+            factors = binmerge.split_factors(c.groups, alpha)
+        out = _assemble(img, mapping, c.srt, c.perm, outs, keep_noisy, c.groups, factors) if n else img
     if want_embeddings:
         def width(f):
             return model.embedding_width(f == centre, len(frames)) if cross else model.embedding_width()
 
         embs = [e if e is not None else np.zeros((fr.srt.num_bins, width(f)), np.float16)
                 for f, (e, fr) in enumerate(zip(embs, frames))]
+    merges = [None if fr.groups is None else fr.groups.index for fr in frames]
     return FrameResult(out, n, c.nonfinite, tiles, embs, [fr.perm for fr in frames],
-                       [fr.stats for fr in frames], [fr.srt.offsets for fr in frames], mapping, dropped, centre)
+                       [fr.stats for fr in frames], [fr.srt.offsets for fr in frames], mapping, dropped,
+                       merges if any(g is not None for g in merges) else None, factors, merge_gap, centre)
 
 
 def _assemble(img: DeepImage, m: ChannelMap, srt: DeepImage, perm: np.ndarray, outs: dict,
-              keep_noisy: str | None) -> DeepImage:
-    """The output image: the file's channels with the denoised layers written back (file bin order)."""
+              keep_noisy: str | None, groups: Groups | None = None, factors: np.ndarray | None = None) -> DeepImage:
+    """The output image: the file's channels with the denoised layers written back (file bin order). `groups`,
+    `factors`: merged thin bins (binmerge) shared back among their members before anything is written."""
     img = replace_nonfinite(img, m.depth_channels())[0]    # one NaN/Inf policy for every channel of the output
     file_vals = img.values.copy()
     ch = img.channels
@@ -404,7 +435,9 @@ def _assemble(img: DeepImage, m: ChannelMap, srt: DeepImage, perm: np.ndarray, o
             file_vals[:, ch.index(name)] = data[:, i]
             replaced.append(name)
 
-    back = lambda a: unsort(a, perm)  # noqa: E731  sorted order -> file order
+    def back(a):   # sorted (merged) order -> file order
+        return unsort(a if groups is None else binmerge.split(a, groups, factors), perm)
+
     diffuse = back(outs["diffuse"])
     emission = layer_values(img, m.layers.get("emission"))
     emission = 0 if emission is None else emission
@@ -419,14 +452,19 @@ def _assemble(img: DeepImage, m: ChannelMap, srt: DeepImage, perm: np.ndarray, o
         beauty = diffuse[:, :3] + emission
     write(m.beauty, beauty)
     if "alpha" in outs:
-        write([m.alpha], np.clip(back(outs["alpha"]), 0, 1))
+        alpha = np.clip(outs["alpha"], 0, 1)
+        write([m.alpha], np.clip(unsort(alpha if groups is None else binmerge.split_alpha(alpha, groups, factors)
+                                        [:, None], perm), 0, 1))
     if "depth" in outs:
-        z_noisy = srt.values[:, srt.channels.index(DEPTH)]
         z_new = np.maximum(outs["depth"][:, 0], 0)
-        write([m.depth], back(z_new)[:, None])
+        if groups is None:
+            thick = np.maximum(srt.values[:, srt.channels.index(DEPTH_BACK)] - srt.channel(DEPTH), 0) \
+                if m.depth_back else 0
+        else:
+            z_new, thick = binmerge.split_depth(z_new, groups), groups.thick.astype(np.float32)
+        write([m.depth], unsort(z_new, perm)[:, None])
         if m.depth_back:
-            thick = np.maximum(srt.values[:, srt.channels.index(DEPTH_BACK)] - z_noisy, 0)
-            write([m.depth_back], back(z_new + thick)[:, None])
+            write([m.depth_back], unsort(z_new + thick, perm)[:, None])
     out = img.with_values(file_vals)
     if keep_noisy:
         names = [f"{keep_noisy}{c}" for c in replaced]

@@ -1,0 +1,224 @@
+"""Thin bins of one surface (binmerge): merged before the model so that a frame a renderer binned finely denoises
+like the same frame binned as ranad's training data, and shared back so that the output keeps every input bin,
+composites to the merged result and stays linear (light groups through the cached kernels still sum)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+from click.testing import CliRunner
+
+from ranad_cli.main import cli
+from ranad_core import binmerge
+from ranad_core.aov import aov_layers, denoise_aovs
+from ranad_core.channels import canonical, detect
+from ranad_core.deep import DeepImage, flatten
+from ranad_core.denoise import denoise_window
+from ranad_core.exr import read_deep, write_deep
+from ranad_core.model import RaNAD, feature_dim, get_config
+from ranad_core.model.crossframe import CrossFrameRaNAD
+from ranad_core.model.store import load_model
+
+from model_factory import input_keys_config
+
+ROOT = Path(__file__).resolve().parents[1]
+SHOT = ROOT / "examples" / "synth_shot"
+STACK = Path(__file__).resolve().parent / "data" / "ranad-synth" / "layer_stack_noisy_spp16.exr"
+GROUPS = ("lg_key", "lg_fill", "lg_rim")
+COLOURS = ("R", "G", "B", "diffuse.", "specular.", "emission.", "lg_")
+
+
+def thin(img: DeepImage, k: int = 3, step: float = 0.002) -> DeepImage:
+    """Every bin as k thin members 0.2% apart in depth, as a renderer that merges less writes one surface: each
+    takes an equal share of the bin's coverage, alpha 1 - (1 - a)^(1/k) and the bin's colour at that alpha, so
+    the members composite exactly to the bin."""
+    ch, n = img.channels, img.num_bins
+    rows = np.repeat(np.arange(n), k)
+    member = np.tile(np.arange(k), n)
+    vals = img.values[rows].astype(np.float64)
+    a = np.clip(img.channel("A").astype(np.float64), 0, 1)
+    ak = 1 - (1 - a) ** (1.0 / k)
+    f = np.repeat(np.where(a > 0, ak / np.maximum(a, 1e-300), 1.0 / k), k)
+    for i, c in enumerate(ch):
+        if c == "A":
+            vals[:, i] = np.repeat(ak, k)
+        elif c in ("Z", "ZBack"):
+            vals[:, i] *= 1 + step * member
+        elif c == "coverage":
+            vals[:, i] /= k
+        elif c in ("R", "G", "B") or c.startswith(COLOURS[3:]):
+            vals[:, i] *= f
+    types = {c: ("uint" if c in img.ids else "float") for c in list(ch) + list(img.ids)}
+    return DeepImage(values=vals.astype(np.float32), offsets=img.offsets * k, channels=list(ch),
+                     ids={name: v[rows] for name, v in img.ids.items()}, data_window=img.data_window,
+                     display_window=img.display_window, channel_types=types)
+
+
+def sorted_canonical(img):
+    canon, _ = canonical(img, detect(img))
+    return canon.sorted()
+
+
+def frame(i=1, crop=None):
+    img = read_deep(SHOT / f"noisy_spp16.{i:04d}.exr")
+    img = img.with_values(img.values.astype(np.float32))
+    return img.crop(crop) if crop else img
+
+
+def stack():
+    """A deep-Z crop of ranad's tracer (its bins are over 3% apart, so thin members never interleave; deep-OID
+    bins of touching objects can sit closer and then keep apart by their ids)."""
+    img = read_deep(STACK)
+    return img.with_values(img.values.astype(np.float32))
+
+
+def test_training_like_bins_never_merge():
+    """ranad's own binning starts a new bin at a 3% jump: its files (the bundled shot, a held-out layer stack)
+    have nothing within the default gap, so merging leaves them, and every model score, as they were."""
+    for img in (frame(0), frame(1), read_deep(STACK)):
+        srt, perm = sorted_canonical(img)
+        assert binmerge.find_groups(srt, {k: v[perm] for k, v in img.ids.items()}) is None
+
+
+def _pixel(zs, alphas, zbacks=None, ids=None):
+    n = len(zs)
+    chans = ["A", "B", "G", "R", "Z"] + (["ZBack"] if zbacks is not None else [])
+    cols = [alphas, [0.1] * n, [0.2] * n, [0.3] * n, zs] + ([zbacks] if zbacks is not None else [])
+    img = DeepImage(values=np.asarray(cols, np.float32).T.copy(), offsets=np.array([0, n]), channels=chans,
+                    ids={} if ids is None else {"id": np.asarray(ids, np.uint32)})
+    return binmerge.find_groups(sorted_canonical(img)[0], img.ids)
+
+
+def test_what_merges():
+    g = _pixel([10.0, 10.05, 10.1, 20.0], [0.3, 0.3, 0.3, 0.5])   # a chain of 0.5% steps, then another surface
+    assert g is not None and list(g.index) == [0, 0, 0, 1] and list(g.offsets) == [0, 2]
+    assert _pixel([10.0, 10.05], [0.3, 0.3], ids=[1, 2]) is None                 # other objects
+    assert _pixel([10.0, 10.05], [0.3, 0.3], zbacks=[10.5, 10.55]) is None       # volumes
+    assert _pixel([10.0, 10.2], [0.3, 0.3]) is None                              # 2% apart: two layers
+    assert _pixel([10.0, 10.05], [0.3, 0.3], ids=[4, 4]) is not None
+
+
+def test_merge_keeps_the_composite_and_sharing_back_composites_to_any_result():
+    img = stack()
+    srt0, _ = sorted_canonical(img)
+    srt, _ = sorted_canonical(thin(img))
+    g = binmerge.find_groups(srt)
+    assert g is not None and g.merged == srt0.num_bins
+    merged = binmerge.merge(srt, g)
+    for c in ("A", "diffuse.R", "specular.G", "albedo.B", "N.X", "Z"):
+        np.testing.assert_allclose(merged.channel(c), srt0.channel(c), atol=2e-5, rtol=1e-4, err_msg=c)
+    np.testing.assert_allclose(merged.channel("ZBack"), srt0.channel("ZBack") * 1.004, rtol=1e-6)  # the back's
+    rng = np.random.default_rng(0)
+    a_new = rng.uniform(0, 1, g.merged)
+    a_new[::7] = 1.0                                                  # opaque results too
+    c_new = rng.uniform(0, 2, (g.merged, 3))
+    f = binmerge.split_factors(g, a_new)
+    a_m = binmerge.split_alpha(a_new, g, f).astype(np.float64)
+    c_m = binmerge.split(c_new, g, f)
+    # the members composited front to back, per group, give the group's result exactly
+    alpha, colour = np.zeros(g.merged), np.zeros((g.merged, 3))
+    t = np.ones(g.merged)
+    for i, grp in enumerate(g.index):
+        alpha[grp] += t[grp] * a_m[i]
+        colour[grp] += t[grp] * c_m[i]
+        t[grp] *= 1 - a_m[i]
+    np.testing.assert_allclose(alpha, a_new, atol=1e-9)
+    np.testing.assert_allclose(colour, c_new, atol=1e-9)
+    # noisy alphas in, the members' own alphas out (hidden members keep the group's)
+    f0 = binmerge.split_factors(g, merged.channel("A"))
+    seen = g.trans > 1e-6
+    np.testing.assert_allclose(binmerge.split_alpha(merged.channel("A"), g, f0)[seen], srt.channel("A")[seen],
+                               atol=1e-5)
+
+
+def test_thin_bins_denoise_like_whole_surface_bins():
+    """The shipped default on a frame and on the same frame binned thinly: the same flattened image, the thin
+    input's bins kept; without merging the thin frame denoises differently (what the merge is for)."""
+    model = load_model(None).model
+    img = stack()
+    fine = thin(img)
+    whole = flatten(denoise_window(model, [img], 0).image)
+    res = denoise_window(model, [fine], 0)
+    out = res.image
+    np.testing.assert_array_equal(out.offsets, fine.offsets)
+    assert res.merges is not None and res.bins == img.num_bins
+    ch = out.channels
+    rgb = [ch.index(c) for c in ("R", "G", "B", "A")]
+    scale = np.abs(whole[..., rgb]).max()
+    assert np.abs(flatten(out)[..., rgb] - whole[..., rgb]).max() < 2e-3 * scale
+    off = denoise_window(model, [fine], 0, merge_gap=0)
+    assert off.merges is None
+    assert np.abs(flatten(off.image)[..., rgb] - whole[..., rgb]).max() > 2e-2 * scale
+
+
+def exact_groups(img):
+    ch = img.channels
+    vals = img.values.astype(np.float32).copy()
+    for c in "RGB":
+        vals[:, ch.index(f"lg_rim.{c}")] = (vals[:, ch.index(c)] - vals[:, ch.index(f"lg_key.{c}")]
+                                            - vals[:, ch.index(f"lg_fill.{c}")])
+    return img.with_values(vals)
+
+
+def sums(img):
+    ch = img.channels
+    lg = sum(img.values[:, [ch.index(f"{g}.{c}") for c in "RGB"]].astype(np.float64) for g in GROUPS)
+    return lg, img.values[:, [ch.index(c) for c in "RGB"]].astype(np.float64)
+
+
+def _models():
+    torch.manual_seed(0)
+    single = RaNAD(get_config("cpu-small-pdl-gza"), feature_dim("prior")).eval()
+    keyed = CrossFrameRaNAD.from_single(RaNAD(get_config("cpu-small"), feature_dim()).eval(), input_keys_config(),
+                                        feature_dim()).eval()
+    for gate in keyed.temporal_gate.values():
+        torch.nn.init.constant_(gate.bias, 0.0)
+    return {"single": single, "input-keys": keyed}
+
+
+@pytest.mark.parametrize("kind", ["single", "input-keys"])
+def test_light_groups_sum_to_the_denoised_beauty_through_merged_bins(kind):
+    model = _models()[kind]
+    frames = [thin(exact_groups(frame(i, (0, 0, 47, 47)))) for i in range(3)]
+    images, centre = (frames, 1) if kind != "single" else ([frames[1]], 0)
+    res = denoise_window(model, images, centre, want_embeddings=True, tile=16)
+    assert res.merges is not None
+    layers = aov_layers(frames[1].channels, "lg_*")
+    out = denoise_aovs(model, images, centre, detect(frames[1]), layers, res.embeddings, res.perms, res.offsets,
+                       None, res.merge_gap, res.merges, res.split)
+    lg_d = sum(out[g].astype(np.float64) for g in GROUPS)
+    _, rgb_d = sums(res.image)
+    lg, _ = sums(frames[1])
+    scale = np.abs(rgb_d).max()
+    assert np.abs(lg_d - rgb_d).max() < 1e-5 * scale
+    assert np.abs(lg_d - lg).max() > 1e-2 * scale
+
+
+def test_aov_command_through_the_cache_of_merged_bins(tmp_path):
+    """`ranad denoise --cache` then `ranad aov` on a thinly binned frame: the groups keep the file's bins and sum
+    to the denoised beauty; `--bin-merge 0` denoises it otherwise."""
+    from safetensors.torch import save_file
+
+    net = _models()["single"]
+    model = tmp_path / "m.safetensors"
+    save_file({k: v.contiguous() for k, v in net.state_dict().items()}, str(model),
+              metadata={"model_config": json.dumps(net.config.to_dict())})
+    src = thin(exact_groups(frame(1, (0, 0, 47, 47))))
+    write_deep(tmp_path / "b.exr", src)
+    run = lambda *a: CliRunner().invoke(cli, [str(x) for x in a])  # noqa: E731
+    r = run("denoise", tmp_path / "b.exr", "-o", tmp_path / "d.exr", "--model", model, "--cache", tmp_path / "c")
+    assert r.exit_code == 0, r.output
+    r = run("aov", tmp_path / "c", "--layers", "lg_*", "-o", tmp_path / "lg.exr")
+    assert r.exit_code == 0, r.output
+    a, d = read_deep(tmp_path / "lg.exr"), read_deep(tmp_path / "d.exr")
+    np.testing.assert_array_equal(a.offsets, src.offsets)
+    lg, _ = sums(a)
+    _, rgb = sums(d)
+    assert np.abs(lg - rgb).max() < 1e-5 * np.abs(rgb).max()
+    r = run("denoise", tmp_path / "b.exr", "-o", tmp_path / "d0.exr", "--model", model, "--bin-merge", "0")
+    assert r.exit_code == 0, r.output
+    assert np.abs(flatten(read_deep(tmp_path / "d0.exr")) - flatten(d)).max() > 0
