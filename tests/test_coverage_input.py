@@ -1,0 +1,45 @@
+"""Files without a `coverage` channel (renderers write none): the model's coverage input is each bin's share of
+its pixel, derived from the alphas, which is what the training data's coverage is, so such a file denoises like
+the same file with the channel."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from ranad_core.deep import flatten
+from ranad_core.denoise import denoise_window
+from ranad_core.exr import read_deep
+from ranad_core.model.inputs import contribution
+from ranad_core.model.store import load_model
+
+ROOT = Path(__file__).resolve().parents[1]
+SHOT = ROOT / "examples" / "synth_shot" / "noisy_spp16.0001.exr"
+
+
+def test_contribution_is_the_renderers_sample_coverage():
+    """The oracle: ranad's tracer counted each bin's samples; the alphas alone give the same shares."""
+    for path in (SHOT,):
+        img, _ = read_deep(path).sorted()
+        share = contribution(img.channel("A"), img.offsets)[:, 0]
+        cov = img.channel("coverage").astype(np.float32)
+        behind = np.r_[False, img.pixel_index()[1:] == img.pixel_index()[:-1]]
+        assert behind.any() and np.abs(img.channel("A") - cov)[behind].max() > 0.1   # alpha itself is not it
+        # all but bins whose order by mean depth differs from the tracer's order by nearest sample (deep-OID
+        # objects whose depth ranges interleave in a pixel: 2 of 3987 bins of the shot's frame)
+        assert np.mean(np.abs(share - cov) < 2e-3) > 0.995
+    np.testing.assert_allclose(contribution(np.array([0.5, 0.5, 1.0, 0.3]), np.array([0, 3, 3, 4]))[:, 0],
+                               [0.5, 0.25, 0.25, 0.3])
+
+
+def test_a_file_without_coverage_denoises_like_the_file_with_it():
+    model = load_model(None).model
+    img = read_deep(SHOT)
+    img = img.with_values(img.values.astype(np.float32))
+    assert "coverage" in img.channels
+    bare = img.select([c for c in img.channels if c != "coverage"])
+    full, without = denoise_window(model, [img], 0).image, denoise_window(model, [bare], 0).image
+    rgba = [full.channels.index(c) for c in ("R", "G", "B", "A")]
+    a, b = flatten(full)[..., rgba], flatten(without)[..., [without.channels.index(c) for c in ("R", "G", "B", "A")]]
+    assert np.abs(a - b).max() < 5e-3 * np.abs(a).max()
