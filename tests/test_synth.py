@@ -230,3 +230,20 @@ def test_a_family_scene_renders(tmp_path):
         parts = sum(cols(img, [f"{k}.{c}" for c in "RGB"]) for k in ("diffuse", "specular", "emission"))
         np.testing.assert_allclose(parts, cols(img, ["R", "G", "B"]), rtol=2e-3, atol=2e-3)
         assert img.num_bins > 0
+
+
+def test_bin_gap_splits_a_surface_into_thin_bins():
+    """The deep-Z split rule's gap (`ranad synth --bin-gap`): one pixel's samples on a surface 0.1%-0.5% apart in
+    depth are one bin at the default 3% and several at 0.2%; a jump of 10% splits at both; references still find
+    their bins (assigned with the 3% tolerance)."""
+    from ranad_core.synth.binning import assign_to_layout, layout_from_samples
+
+    z = np.array([10.0, 10.01, 10.05, 10.06, 11.0, 11.05])
+    s = {"hit": np.ones(6, bool), "pixel": np.zeros(6, np.int64), "z": z, "obj": np.zeros(6, np.uint32)}
+    coarse, sb = layout_from_samples(s, 1, 1, "z")
+    fine, sf = layout_from_samples(s, 1, 1, "z", gap_rel=0.002)
+    assert len(coarse.pixel) == 2 and list(sb) == [0, 0, 0, 0, 1, 1]
+    assert len(fine.pixel) == 4 and list(sf) == [0, 0, 1, 1, 2, 3]
+    ref = {"hit": np.ones(3, bool), "pixel": np.zeros(3, np.int64), "z": np.array([10.03, 10.9, 11.3]),
+           "obj": np.zeros(3, np.uint32)}
+    assert (assign_to_layout(ref, fine) >= 0).all()
