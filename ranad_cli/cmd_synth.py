@@ -39,7 +39,11 @@ from .params import int_list as _int_list
               help="Deep-Z binning: a pixel's samples start a new bin where consecutive depths differ by more than "
                    "this share (plus 1 cm at the default). Small values split surfaces into many thin bins, as "
                    "renderers that merge less do (held-out data for `ranad denoise --bin-merge`).")
-def synth_cmd(out, scenes, size, frames, spp, ref_spp, seed, presets, kinds, workers, ref_frames, motion, bin_gap):
+@click.option("--sampler", type=click.Choice(["independent", "stratified"]), default="independent", show_default=True,
+              help="Noisy frames' pixel and lens samples: independent, or jittered in n x n strata per pixel (n^2 <= "
+                   "spp) as production renderers' samplers do (far less noisy coverage and defocus).")
+def synth_cmd(out, scenes, size, frames, spp, ref_spp, seed, presets, kinds, workers, ref_frames, motion, bin_gap,
+              sampler):
     """Render SCENES procedural animated scenes: every frame at each noisy spp, and the centre frame's
     reference binned into each noisy image's bins, as deep-Z and deep-OID EXRs with a manifest per scene.
 
@@ -54,7 +58,7 @@ def synth_cmd(out, scenes, size, frames, spp, ref_spp, seed, presets, kinds, wor
     cfg = dataset.SynthConfig(out=out, scenes=scenes, size=size, frames=frames, spp=_int_list(spp), ref_spp=ref_spp,
                               seed=seed, presets=tuple(presets) or PRESETS,
                               kinds=tuple(kinds) or ("deepz", "deepoid"), ref_frames=ref_frames,
-                              motion=motion, bin_gap=bin_gap)
+                              motion=motion, bin_gap=bin_gap, sampler=sampler)
     skipped = sum(dataset.is_done(cfg, i) for i in range(scenes))
     try:
         with tqdm(total=scenes - skipped, desc="synth", unit="scene", disable=scenes - skipped <= 1) as bar:

@@ -247,3 +247,22 @@ def test_bin_gap_splits_a_surface_into_thin_bins():
     ref = {"hit": np.ones(3, bool), "pixel": np.zeros(3, np.int64), "z": np.array([10.03, 10.9, 11.3]),
            "obj": np.zeros(3, np.uint32)}
     assert (assign_to_layout(ref, fine) >= 0).all()
+
+
+@pytest.mark.parametrize("spp", [16, 5])
+def test_stratified_sampler_puts_one_sample_in_each_stratum(spp):
+    """`ranad synth --sampler stratified`: each pixel's first n^2 samples (n = floor(sqrt(spp))) fall one in each of
+    its n x n strata; the rest are independent."""
+    from ranad_core.synth.render import trace_all
+
+    fs = load_frame(make_scene(4, "easy", 8, 1), 0)
+    s = trace_all(fs, spp, 1, stratified=True)
+    n = int(np.sqrt(spp))
+    sx, sy = s["sx"].reshape(64, spp), s["sy"].reshape(64, spp)
+    assert ((sx >= 0) & (sx < 1) & (sy >= 0) & (sy < 1)).all()
+    cells = np.floor(sx[:, :n * n] * n) + n * np.floor(sy[:, :n * n] * n)
+    assert (np.sort(cells, 1) == np.arange(n * n)).all()
+    free = trace_all(fs, spp, 1)
+    fx, fy = free["sx"].reshape(64, spp)[:, :n * n], free["sy"].reshape(64, spp)[:, :n * n]
+    cells = np.floor(fx * n) + n * np.floor(fy * n)
+    assert not (np.sort(cells, 1) == np.arange(n * n)).all()

@@ -41,6 +41,7 @@ class SynthConfig:
     ref_frames: str = "centre"        # "centre", or "all" (references for every frame: temporal evaluation)
     motion: float = 1.0               # per-frame motion scale (scene.make_scene): 0.5 = twice the frame rate
     bin_gap: float = Z_GAP_REL        # deep-Z split rule's relative depth gap (binning.layout_from_samples)
+    sampler: str = "independent"      # noisy frames' pixel and lens samples: "independent" or "stratified" (trace)
 
 
 def scene_seed(seed: int, index: int) -> int:
@@ -91,7 +92,7 @@ def make_one(cfg: SynthConfig, index: int) -> dict:
         fs = load_frame(spec, frame)
         layouts = []  # (kind, spp, layout): the frame's reference is traced once and binned into each
         for spp in cfg.spp:
-            samples = noisy_samples(spec, frame, spp, sseed + 7919 * frame + spp, fs)
+            samples = noisy_samples(spec, frame, spp, sseed + 7919 * frame + spp, fs, cfg.sampler == "stratified")
             for kind_name in cfg.kinds:
                 img, lay = bin_noisy(spec, samples, spp, KINDS[kind_name], cfg.bin_gap)
                 path = os.path.join(root, kind_name, f"noisy_spp{spp}.{frame:04d}.exr")
@@ -117,6 +118,7 @@ def make_one(cfg: SynthConfig, index: int) -> dict:
     manifest = {"scene": index, "seed": sseed, "preset": preset, "size": cfg.size, "frames": cfg.frames,
                 "motion": cfg.motion, "centre_frame": centre, "reference_frames": ref_frames, "spp": list(cfg.spp),
                 "ref_spp": cfg.ref_spp, **({"bin_gap": cfg.bin_gap} if cfg.bin_gap != Z_GAP_REL else {}),
+                **({"sampler": cfg.sampler} if cfg.sampler != "independent" else {}),
                 "light_groups": spec.light_groups, "objects": len(spec.objects), "files": files, "stats": stats,
                 "seconds": round(time.perf_counter() - t0, 2)}
     with atomic_output(os.path.join(root, "manifest.json")) as tmp:
