@@ -98,7 +98,7 @@ def test_what_merges():
     assert g is not None and list(g.index) == [0, 0, 0, 1] and list(g.offsets) == [0, 2]
     assert _pixel([10.0, 10.05], [0.3, 0.3], ids=[1, 2]) is None                 # other objects
     assert _pixel([10.0, 10.05], [0.3, 0.3], zbacks=[10.5, 10.55]) is None       # volumes
-    assert _pixel([10.0, 10.2], [0.3, 0.3]) is None                              # 2% apart: two layers
+    assert _pixel([10.0, 10.4], [0.3, 0.3]) is None                              # 4% apart: two layers
     assert _pixel([10.0, 10.05], [0.3, 0.3], ids=[4, 4]) is not None
 
 
