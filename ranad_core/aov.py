@@ -151,7 +151,10 @@ def denoise_aovs(model, images: list, centre: int, mapping: ChannelMap, layers: 
     total_out = (torch.cat(denoised["diffuse"], 1) + torch.cat(denoised["specular"], 1) + vals[centre]["pass"])
     out = total_out.cpu().numpy()
     if centre_groups is not None:
-        out = binmerge.split(out, centre_groups, np.asarray(split))
+        factors = None if split is None else np.asarray(split, np.float64).reshape(-1)
+        if factors is None or factors.shape[0] != centre_groups.index.shape[0] or not np.isfinite(factors).all():
+            raise RanadError("the cache's share-back factors do not match its bin merges (a damaged cache?)", None)
+        out = binmerge.split(out, centre_groups, factors)
     out = unsort(out, perms[centre])
     return {layer: out[:, 3 * i:3 * i + 3] for i, layer in enumerate(layers)}
 
@@ -191,11 +194,16 @@ def denoise_cached_frame(loaded, cache_path: str, tensors: dict, meta: dict, pat
     mapping = detect(beauty[centre], json.loads(meta.get("overrides", "{}")), window[centre])
     k = len(window)
     merges = [tensors.get(f"merge.{i}") for i in range(k)]
-    result = denoise_aovs(loaded.model, combined, centre, mapping, layers,
-                          [tensors[f"embeddings.{i}"] for i in range(k)],
-                          [tensors[f"perm.{i}"] for i in range(k)], [tensors[f"offsets.{i}"] for i in range(k)],
-                          None, float(meta.get("merge_gap", "0")), merges if any(x is not None for x in merges)
-                          else None, tensors.get("split"))
+    try:
+        result = denoise_aovs(loaded.model, combined, centre, mapping, layers,
+                              [tensors[f"embeddings.{i}"] for i in range(k)],
+                              [tensors[f"perm.{i}"] for i in range(k)], [tensors[f"offsets.{i}"] for i in range(k)],
+                              None, float(meta.get("merge_gap", "0")), merges if any(x is not None for x in merges)
+                              else None, tensors.get("split"))
+    except RanadError as e:   # the cache and the files disagree: name the cache
+        if e.path is None:
+            raise RanadError(e.problem, cache_path) from None
+        raise
     target = replace_nonfinite(aov_imgs[centre], mapping.depth_channels())[0]   # the one NaN/Inf policy
     vals = target.values.copy()
     for layer, chans in layers.items():

@@ -200,7 +200,8 @@ def test_light_groups_sum_to_the_denoised_beauty_through_merged_bins(kind):
 
 def test_aov_command_through_the_cache_of_merged_bins(tmp_path):
     """`ranad denoise --cache` then `ranad aov` on a thinly binned frame: the groups keep the file's bins and sum
-    to the denoised beauty; `--bin-merge 0` denoises it otherwise."""
+    to the denoised beauty; a cache whose merge tensors were damaged is refused; `--bin-merge 0` denoises it
+    otherwise."""
     from safetensors.torch import save_file
 
     net = _models()["single"]
@@ -219,6 +220,19 @@ def test_aov_command_through_the_cache_of_merged_bins(tmp_path):
     lg, _ = sums(a)
     _, rgb = sums(d)
     assert np.abs(lg - rgb).max() < 1e-5 * np.abs(rgb).max()
+    from safetensors.numpy import load_file, save_file as save_np
+    from safetensors import safe_open
+
+    cache = next((tmp_path / "c").iterdir())
+    with safe_open(str(cache), framework="np") as f:
+        meta = f.metadata()
+    tensors = load_file(str(cache))
+    for key, bad, message in (("split", tensors["split"][:-1], "share-back factors"),
+                              ("merge.0", tensors["merge.0"][::-1].copy(), "cached bin merges")):
+        save_np({**tensors, key: bad}, str(cache), metadata=meta)
+        r = run("aov", tmp_path / "c", "--layers", "lg_*", "-o", tmp_path / "bad.exr")
+        assert r.exit_code == 2 and message in r.output and str(cache) in r.output, r.output
+        assert not (tmp_path / "bad.exr").exists()
     r = run("denoise", tmp_path / "b.exr", "-o", tmp_path / "d0.exr", "--model", model, "--bin-merge", "0")
     assert r.exit_code == 0, r.output
     assert np.abs(flatten(read_deep(tmp_path / "d0.exr")) - flatten(d)).max() > 0
