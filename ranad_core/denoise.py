@@ -27,8 +27,8 @@ import torch
 
 from . import binmerge
 from .binmerge import Groups
-from .channels import (ALPHA, DEPTH, DEPTH_BACK, DEPTHS, FLAT_NOISY, PRIOR, ChannelMap, canonical, detect, layer_values,
-                       split_layer)
+from .channels import (ALPHA, DEPTH, DEPTH_BACK, DEPTHS, FLAT_NOISY, PRIOR, ChannelMap, canonical, detect,
+                       layer_values, split_layer)
 from .deep import DeepImage, replace_nonfinite, unsort
 from .model.inputs import depth_stats, prepare
 from .profile import record_tile, stage
@@ -40,7 +40,7 @@ BYTES_PER_BIN = 2048       # model working memory per bin at inference (measured
 @dataclass
 class FrameResult:
     image: DeepImage
-    bins: int
+    bins: int                            # the centre file's bins (before any merging)
     nonfinite: int                       # bins that had a non-finite value in a channel the model reads
     tiles: int
     embeddings: list | None = None       # per window frame: [N_f, dim] float16, sorted bin order (AOV cache)
@@ -416,7 +416,7 @@ def _denoise_window(model, images, centre, mapping, tile, halo, keep_noisy, want
         embs = [e if e is not None else np.zeros((fr.srt.num_bins, width(f)), np.float16)
                 for f, (e, fr) in enumerate(zip(embs, frames))]
     merges = [None if fr.groups is None else fr.groups.index for fr in frames]
-    return FrameResult(out, n, c.nonfinite, tiles, embs, [fr.perm for fr in frames],
+    return FrameResult(out, img.num_bins, c.nonfinite, tiles, embs, [fr.perm for fr in frames],
                        [fr.stats for fr in frames], [fr.srt.offsets for fr in frames], mapping, dropped,
                        merges if any(g is not None for g in merges) else None, factors, merge_gap, centre)
 

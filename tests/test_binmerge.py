@@ -145,7 +145,7 @@ def test_thin_bins_denoise_like_whole_surface_bins():
     res = denoise_window(model, [fine], 0)
     out = res.image
     np.testing.assert_array_equal(out.offsets, fine.offsets)
-    assert res.merges is not None and res.bins == img.num_bins
+    assert res.merges is not None and res.bins == fine.num_bins and res.offsets[0][-1] == img.num_bins
     ch = out.channels
     rgb = [ch.index(c) for c in ("R", "G", "B", "A")]
     scale = np.abs(whole[..., rgb]).max()
