@@ -64,7 +64,7 @@ def find_groups(srt: DeepImage, ids: dict | None = None, gap: float = MERGE_GAP)
     z = srt.channel(DEPTH).astype(np.float64)
     zb = srt.channel(DEPTH_BACK).astype(np.float64) if DEPTH_BACK in srt.channels else z
     thick = np.maximum(zb - z, 0)
-    point = thick <= gap * np.abs(z)
+    point = (thick <= gap * z) & (z > 0)   # bins without a usable depth (0, negative, NaN) never merge
     pix = srt.pixel_index()
     join = np.zeros(n, bool)   # bin i joins the group of bin i - 1
     join[1:] = (pix[1:] == pix[:-1]) & point[1:] & point[:-1] & (z[1:] <= z[:-1] + gap * np.abs(z[:-1]))

@@ -100,6 +100,7 @@ def test_what_merges():
     assert _pixel([10.0, 10.05], [0.3, 0.3], zbacks=[10.5, 10.55]) is None       # volumes
     assert _pixel([10.0, 10.4], [0.3, 0.3]) is None                              # 4% apart: two layers
     assert _pixel([10.0, 10.05], [0.3, 0.3], ids=[4, 4]) is not None
+    assert _pixel([0.0, 0.0], [0.3, 0.3]) is None and _pixel([np.nan, np.nan], [0.3, 0.3]) is None   # no depths
 
 
 def test_merge_keeps_the_composite_and_sharing_back_composites_to_any_result():
