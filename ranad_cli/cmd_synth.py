@@ -42,8 +42,12 @@ from .params import int_list as _int_list
 @click.option("--sampler", type=click.Choice(["independent", "stratified"]), default="independent", show_default=True,
               help="Noisy frames' pixel and lens samples: independent, or jittered in n x n strata per pixel (n^2 <= "
                    "spp) as production renderers' samplers do (far less noisy coverage and defocus).")
+@click.option("--guides", type=click.Choice(["first-hit", "through-specular"]), default="first-hit",
+              show_default=True,
+              help="Albedo/normal guides: the first surface's own, or (through-specular) those of the first surface "
+                   "behind smooth glass and mirrors, as OIDN asks and renderers' denoising AOVs write.")
 def synth_cmd(out, scenes, size, frames, spp, ref_spp, seed, presets, kinds, workers, ref_frames, motion, bin_gap,
-              sampler):
+              sampler, guides):
     """Render SCENES procedural animated scenes: every frame at each noisy spp, and the centre frame's
     reference binned into each noisy image's bins, as deep-Z and deep-OID EXRs with a manifest per scene.
 
@@ -58,7 +62,7 @@ def synth_cmd(out, scenes, size, frames, spp, ref_spp, seed, presets, kinds, wor
     cfg = dataset.SynthConfig(out=out, scenes=scenes, size=size, frames=frames, spp=_int_list(spp), ref_spp=ref_spp,
                               seed=seed, presets=tuple(presets) or PRESETS,
                               kinds=tuple(kinds) or ("deepz", "deepoid"), ref_frames=ref_frames,
-                              motion=motion, bin_gap=bin_gap, sampler=sampler)
+                              motion=motion, bin_gap=bin_gap, sampler=sampler, guides=guides)
     skipped = sum(dataset.is_done(cfg, i) for i in range(scenes))
     try:
         with tqdm(total=scenes - skipped, desc="synth", unit="scene", disable=scenes - skipped <= 1) as bar:

@@ -266,3 +266,20 @@ def test_stratified_sampler_puts_one_sample_in_each_stratum(spp):
     fx, fy = free["sx"].reshape(64, spp)[:, :n * n], free["sy"].reshape(64, spp)[:, :n * n]
     cells = np.floor(fx * n) + n * np.floor(fy * n)
     assert not (np.sort(cells, 1) == np.arange(n * n)).all()
+
+
+def test_through_specular_guides_change_only_the_guides(tmp_path):
+    """`ranad synth --guides through-specular`: the same samples and radiance, albedo and normal taken behind
+    smooth glass (a glass scene's flat, zero-albedo guides mostly give way to what is seen through it)."""
+    made = {}
+    for guides in ("first-hit", "through-specular"):
+        cfg = dataset.SynthConfig(out=str(tmp_path / guides), scenes=1, size=24, frames=1, spp=(4,), ref_spp=4,
+                                  seed=5, presets=("glass",), kinds=("deepz",), guides=guides)
+        dataset.run(cfg)
+        made[guides] = read_deep(os.path.join(cfg.out, "scene_0000", "deepz", "noisy_spp4.0000.exr"))
+    a, b = made["first-hit"], made["through-specular"]
+    np.testing.assert_array_equal(a.offsets, b.offsets)
+    for c in a.channels:
+        if not c.startswith(("albedo.", "N.")):
+            np.testing.assert_array_equal(a.channel(c), b.channel(c), err_msg=c)
+    assert (b.channel("albedo.G") < 1e-3).mean() < (a.channel("albedo.G") < 1e-3).mean() - 0.05

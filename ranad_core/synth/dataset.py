@@ -42,6 +42,7 @@ class SynthConfig:
     motion: float = 1.0               # per-frame motion scale (scene.make_scene): 0.5 = twice the frame rate
     bin_gap: float = Z_GAP_REL        # deep-Z split rule's relative depth gap (binning.layout_from_samples)
     sampler: str = "independent"      # noisy frames' pixel and lens samples: "independent" or "stratified" (trace)
+    guides: str = "first-hit"         # albedo/normal of the first surface, or "through-specular" (trace)
 
 
 def scene_seed(seed: int, index: int) -> int:
@@ -92,7 +93,8 @@ def make_one(cfg: SynthConfig, index: int) -> dict:
         fs = load_frame(spec, frame)
         layouts = []  # (kind, spp, layout): the frame's reference is traced once and binned into each
         for spp in cfg.spp:
-            samples = noisy_samples(spec, frame, spp, sseed + 7919 * frame + spp, fs, cfg.sampler == "stratified")
+            samples = noisy_samples(spec, frame, spp, sseed + 7919 * frame + spp, fs, cfg.sampler == "stratified",
+                                    cfg.guides == "through-specular")
             for kind_name in cfg.kinds:
                 img, lay = bin_noisy(spec, samples, spp, KINDS[kind_name], cfg.bin_gap)
                 path = os.path.join(root, kind_name, f"noisy_spp{spp}.{frame:04d}.exr")
@@ -119,6 +121,7 @@ def make_one(cfg: SynthConfig, index: int) -> dict:
                 "motion": cfg.motion, "centre_frame": centre, "reference_frames": ref_frames, "spp": list(cfg.spp),
                 "ref_spp": cfg.ref_spp, **({"bin_gap": cfg.bin_gap} if cfg.bin_gap != Z_GAP_REL else {}),
                 **({"sampler": cfg.sampler} if cfg.sampler != "independent" else {}),
+                **({"guides": cfg.guides} if cfg.guides != "first-hit" else {}),
                 "light_groups": spec.light_groups, "objects": len(spec.objects), "files": files, "stats": stats,
                 "seconds": round(time.perf_counter() - t0, 2)}
     with atomic_output(os.path.join(root, "manifest.json")) as tmp:

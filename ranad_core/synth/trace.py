@@ -81,13 +81,17 @@ REFERENCE_FIELDS = ("diffuse", "specular", "emission", "groups", "hit", "obj", "
 
 
 def trace(fs: FrameScene, spp: int, seed: int, start: int, count: int, max_depth: int = 4,
-          fields: tuple | None = None, stratified: bool = False) -> dict:
+          fields: tuple | None = None, stratified: bool = False, through_specular: bool = False) -> dict:
     """Samples start..start+count-1 of the frame (sample i belongs to pixel i // spp), as numpy arrays.
 
     fields: the outputs to return besides pixel/sx/sy (default: all); references need only REFERENCE_FIELDS.
     stratified: the pixel and lens positions jittered in a pixel's n x n strata (n = floor(sqrt(spp)), the lens
     strata in another order than the pixel's), as production renderers' stratified and low-discrepancy samplers
     make coverage and defocus far less noisy than independent samples do; the rest stays independent.
+    through_specular: albedo and normal where a path starting at a smooth (delta) surface first reaches a surface
+    with a non-delta lobe, the albedo times the delta bounces' throughput (what OIDN asks of its guides, and what
+    renderers' denoising AOVs write for glass and mirrors); default: the first surface's own (a glass's is flat).
+    Radiance and every random number are the same either way.
     """
     mi = mitsuba()
     import drjit as dr
@@ -116,8 +120,9 @@ def trace(fs: FrameScene, spp: int, seed: int, start: int, count: int, max_depth
     ray, _ = sensor.sample_ray(0.0, 0.5, mi.Point2f(px / W, py / H), mi.Point2f(lx, ly))
     tables = (mi.UInt32(fs.object_of_shape), mi.Float(fs.opacity_of_shape), mi.UInt32(fs.cutout_of_shape),
               mi.Int32(fs.group_of_emitter))
-    out = _loop(mi, dr, fs.mi_scene, mi.EmitterPtr(fs.emitters), len(fs.emitters), ray, rng, tables, mi.Point3f(*map(float, fs.cam_origin)), mi.Vector3f(*map(float, fs.cam_forward)),
-                max_depth)
+    out = _loop(mi, dr, fs.mi_scene, mi.EmitterPtr(fs.emitters), len(fs.emitters), ray, rng, tables,
+                mi.Point3f(*map(float, fs.cam_origin)), mi.Vector3f(*map(float, fs.cam_forward)), max_depth,
+                through_specular)
     dr.eval(out)
     res = {"pixel": np.asarray(pix, dtype=np.int64), "sx": np.asarray(sx), "sy": np.asarray(sy)}
     want = set(fields or out)
@@ -153,7 +158,7 @@ def _mis(a, b):
     return dr.detach(dr.select(a > 0, a2 / (a2 + dr.square(b)), 0.0))
 
 
-def _loop(mi, dr, scene, emitters, n_emitters, ray, rng, tables, cam_o, cam_f, max_depth):
+def _loop(mi, dr, scene, emitters, n_emitters, ray, rng, tables, cam_o, cam_f, max_depth, through=False):
     obj_t, opac_t, cut_t, grp_t = tables
     n = dr.width(ray.o)
     black = mi.Color3f(0.0)
@@ -169,7 +174,8 @@ def _loop(mi, dr, scene, emitters, n_emitters, ray, rng, tables, cam_o, cam_f, m
         diffuse=mi.Color3f(0.0), specular=mi.Color3f(0.0), emission=mi.Color3f(0.0),
         group0=mi.Color3f(0.0), group1=mi.Color3f(0.0), group2=mi.Color3f(0.0),
         hit=mi.Bool(False), obj=mi.UInt32(0), z=mi.Float(0.0), distance=mi.Float(0.0), albedo=mi.Color3f(0.0),
-        normal=mi.Vector3f(0.0), position=mi.Point3f(0.0), rng=rng)
+        normal=mi.Vector3f(0.0), position=mi.Point3f(0.0), rng=rng,
+        gopen=mi.Bool(False), gbeta=mi.Color3f(1.0))   # through-specular guides: still looking, and the throughput
 
     def add_group(st, g, value, mask):
         for k in range(MAX_GROUPS):
@@ -216,6 +222,12 @@ def _loop(mi, dr, scene, emitters, n_emitters, ray, rng, tables, cam_o, cam_f, m
         st["albedo"] = dr.select(first_now, bsdf.eval_diffuse_reflectance(si, first_now), st["albedo"])
         st["normal"] = dr.select(first_now, si.sh_frame.n, st["normal"])
         st["position"] = dr.select(first_now, si.p, st["position"])
+        rough = mi.has_flag(bsdf.flags(), mi.BSDFFlags.Smooth)   # a lobe that is not a delta
+        if through:   # the first surface behind smooth glass or mirrors gives the guides
+            land = later & st["gopen"] & rough
+            st["albedo"] = dr.select(land, st["gbeta"] * bsdf.eval_diffuse_reflectance(si, land), st["albedo"])
+            st["normal"] = dr.select(land, si.sh_frame.n, st["normal"])
+            st["gopen"] = st["gopen"] & ~land
 
         # next-event estimation (light sampling), split by lobe at the first stop
         nee = shade & mi.has_flag(bsdf.flags(), mi.BSDFFlags.Smooth)
@@ -244,6 +256,10 @@ def _loop(mi, dr, scene, emitters, n_emitters, ray, rng, tables, cam_o, cam_f, m
         bs, w = bsdf.sample(ctx, si, r.next_float32(), mi.Point2f(r.next_float32(), r.next_float32()), shade)
         delta = mi.has_flag(bs.sampled_type, mi.BSDFFlags.Delta)
         ok = shade & (bs.pdf > 0)
+        if through:
+            follow = shade & ~rough & delta & ok & (first_now | st["gopen"])
+            st["gbeta"] = dr.select(follow, st["gbeta"] * w, st["gbeta"])
+            st["gopen"] = dr.select(shade, follow, st["gopen"])   # passing through a cutout keeps looking
         bd = dr.select(delta, black, bsdf.eval(ctx_d, si, bs.wo, first_now & ~delta) / bs.pdf)
         bsp = dr.select(delta, w, bsdf.eval(ctx_s, si, bs.wo, first_now & ~delta) / bs.pdf)
         st["beta_d"] = dr.select(first_now, bd, dr.select(later, st["beta_d"] * w, st["beta_d"]))
