@@ -24,7 +24,8 @@ for root in sys.argv[4:]:
     for sc in sorted(Path(root).glob("scene_*")):
         fam = json.loads((sc / "manifest.json").read_text())["preset"]
         for spp in sys.argv[1].split(","):
-            noisy, ref = read_deep(sc / f"deepz/noisy_spp{spp}.0000.exr"), read_deep(sc / f"deepz/reference_spp{spp}.0000.exr")
+            noisy = read_deep(sc / f"deepz/noisy_spp{spp}.0000.exr")
+            ref = read_deep(sc / f"deepz/reference_spp{spp}.0000.exr")
             den = denoise_window(m, [noisy], 0).image
             ch = den.channels
             R = metrics.flat_rgb(ref)
@@ -46,4 +47,5 @@ for root in sys.argv[4:]:
             acc.setdefault((fam, spp), []).append(row)
     for (fam, spp), rows in sorted(acc.items()):
         r = np.mean(rows, 0)
-        print(f"{root.split('/')[-1]} {fam:10s} {spp:>3s} noisy {r[0]:.4f} ranad {r[1]:.4f} " + " ".join(f"s{s:g} {x:.4f}" for s, x in zip(sigmas, r[2:])))
+        print(f"{root.split('/')[-1]} {fam:10s} {spp:>3s} noisy {r[0]:.4f} ranad {r[1]:.4f} "
+              + " ".join(f"s{s:g} {x:.4f}" for s, x in zip(sigmas, r[2:])))
