@@ -212,6 +212,10 @@ def test_aov_command_through_the_cache_of_merged_bins(tmp_path):
     src = thin(exact_groups(frame(1, (0, 0, 47, 47))))
     write_deep(tmp_path / "b.exr", src)
     run = lambda *a: CliRunner().invoke(cli, [str(x) for x in a])  # noqa: E731
+    r = run("info", tmp_path / "b.exr")
+    thin_count = int(r.output.split("thin bins: ")[1].split()[0])    # at most two of every three members merge away
+    assert r.exit_code == 0 and 0.6 * src.num_bins < thin_count <= src.num_bins - src.num_bins // 3, r.output
+    assert "thin bins" not in run("info", SHOT / "noisy_spp16.0001.exr").output
     r = run("denoise", tmp_path / "b.exr", "-o", tmp_path / "d.exr", "--model", model, "--cache", tmp_path / "c")
     assert r.exit_code == 0, r.output
     r = run("aov", tmp_path / "c", "--layers", "lg_*", "-o", tmp_path / "lg.exr")

@@ -42,6 +42,18 @@ def guess_kind(image: DeepImage) -> str:
     return "deep-Z" if repeated else "deep-OID"
 
 
+def thin_bins(image: DeepImage) -> int:
+    """Bins that `ranad denoise` merges into the bin in front of them at the default gap (binmerge): thin bins of
+    one surface, as renderers that merge a pixel's samples less than ranad's training data write."""
+    from ..binmerge import find_groups
+
+    if image.num_bins < 2 or "A" not in image.channels or "Z" not in image.channels:
+        return 0
+    srt, perm = image.sorted()
+    groups = find_groups(srt, {k: v[perm] for k, v in image.ids.items()})
+    return 0 if groups is None else image.num_bins - groups.merged
+
+
 def _deep_stats(image: DeepImage) -> dict[str, Any]:
     counts = image.counts
     covered = counts > 0
@@ -58,6 +70,7 @@ def _deep_stats(image: DeepImage) -> dict[str, Any]:
         "id_channels": list(image.ids),
         "nonfinite_values": nonfinite,
         "measured_state": image.measured_state(),
+        "thin_bins": thin_bins(image),
     }
 
 
