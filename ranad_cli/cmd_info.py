@@ -53,8 +53,8 @@ def _print_text(d: dict) -> None:
         click.echo(f"    id channels: {ids}; id manifest: {'yes' if p['id_manifest'] else 'no'}")
         if p.get("thin_bins"):
             share = 100 * p["thin_bins"] / max(p["bins"], 1)
-            click.echo(f"    thin bins: {p['thin_bins']} ({share:.1f}%) lie within {100 * MERGE_GAP:g}% in depth of the "
-                       "bin in front (same ids): ranad denoise merges them (--bin-merge)")
+            click.echo(f"    thin bins: {p['thin_bins']} ({share:.1f}%) lie within {100 * MERGE_GAP:g}% in depth of "
+                       "the bin in front (same ids): ranad denoise merges them (--bin-merge)")
         if p["nonfinite_values"]:
             click.echo(f"    WARNING: {p['nonfinite_values']} NaN/Inf sample values")
 
