@@ -81,7 +81,9 @@ def parse_bytes(text: str) -> float:
               help="Folder for the embedding cache `ranad aov` reuses (one .ranadcache file per frame).")
 @click.option("--skip-existing", is_flag=True, help="Skip frames whose output exists (resume a shot).")
 @click.option("--shard", default=None, metavar="I/N", help="Only farm task I of N (frames I, I+N, ...).")
-@click.option("--strict", is_flag=True, help="Fail on NaN/Inf input samples instead of replacing them.")
+@click.option("--strict", is_flag=True,
+              help="Fail on NaN/Inf input samples instead of replacing them, and on any negative depth (a frame "
+                   "with more than 0.1% of its bins at negative depth is refused anyway: another z convention).")
 @click.option("--window", type=click.IntRange(1, 7), default=None,
               help="Frames per window for cross-frame models (default: the window the model was trained with; 1 "
                    "denoises every frame alone).")

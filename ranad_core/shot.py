@@ -16,6 +16,8 @@ import os
 import time
 from dataclasses import dataclass, field
 
+import numpy as np
+
 from . import cache as cache_io
 from .channels import REQUIRED, detect, motion_candidates
 from .denoise import (ALIGN, CPU_TILE_BINS, choose_tile, denoise_window, halo_for, is_cross_frame, model_features,
@@ -37,7 +39,7 @@ class ShotOptions:
     bin_merge: float | None = None                   # binmerge gap (None: its default; 0: off)
     cache_dir: str | None = None
     skip_existing: bool = False
-    strict: bool = False                             # non-finite samples: error instead of fix
+    strict: bool = False                             # non-finite samples, negative depths: error instead of fix
     window: int = 1                                  # frames per window (cross-frame models only)
     aovs: str | None = None                          # glob of AOV layers denoised with the same kernels
     kind: str = "auto"                               # deepz / deepoid: every frame must be of that kind
@@ -283,6 +285,21 @@ def count_nonfinite(img) -> int:
     return int((~np.isfinite(img.values)).any(axis=1).sum()) if img.num_bins else 0
 
 
+NEGATIVE_DEPTH_SHARE = 0.001   # more bins than this behind the camera: a depth convention, not a stray sample
+
+
+def check_depths(img, depth: str, source: str, strict: bool = False) -> int:
+    """The bins with a negative depth (0 when none). Deep EXR depths are distances in front of the camera; a frame
+    with more than NEGATIVE_DEPTH_SHARE of its bins behind it (or any, with --strict) was written in another
+    convention (camera-space z pointing backwards), which would reverse the bins' order: refused."""
+    z = np.asarray(img.channel(depth))
+    negative = int(np.count_nonzero(z < 0))
+    if negative and (strict or negative > NEGATIVE_DEPTH_SHARE * z.size):
+        raise RanadError(f"{negative} of {z.size} bins have a negative depth {depth!r}; deep EXR depths are distances "
+                         "in front of the camera (was it written as camera-space z?)", source)
+    return negative
+
+
 def check_kind(img, kind: str, source: str) -> str:
     """The frame's kind ('deepz' or 'deepoid', inspect.guess_kind's rule); with `kind` other than auto a frame
     of the other kind is a RanadError naming it (`--kind` states what the shot must be, and is checked)."""
@@ -404,6 +421,9 @@ def _denoise_part(model, images, centre, flows, where, opts, summary, halo, tile
     bad = count_nonfinite(img)                  # every channel, not only those the model reads
     if bad and opts.strict:
         raise RanadError(f"{bad} bin(s) with NaN/Inf values", where)
+    negative = check_depths(img, mapping.depth, where, opts.strict)
+    if negative:
+        summary.messages.append(f"{where}: {negative} bin(s) with a negative depth (read as 0)")
     if len(images) > 1 and not summary.no_motion:
         from .motion import has_any_motion
 

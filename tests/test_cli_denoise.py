@@ -339,3 +339,23 @@ def test_profile_reports_every_stage_and_changes_nothing(tmp_path, model_file):
     windows = [counts[max(0, y - 16):y + 48, max(0, x - 16):x + 48].sum() for y in (0, 32) for x in (0, 32)]
     assert (int(m.group(2)), int(m.group(3))) == (min(windows), max(windows))
     assert float(m.group(4)) == pytest.approx(sum(windows) / img.num_bins, abs=0.01)
+
+
+def test_negative_depths_are_a_convention_error(tmp_path, model_file):
+    """Depths behind the camera: a frame written as camera-space z (every depth negative) is refused, exit 2 and no
+    output; a stray negative bin is denoised (read as 0) with a message, and refused with --strict."""
+    img = read_deep(FRAME)
+    z = img.channels.index("Z")
+    flipped = img.values.copy()
+    flipped[:, z] *= -1
+    write_deep(tmp_path / "neg.exr", img.with_values(flipped))
+    r = run("denoise", tmp_path / "neg.exr", "-o", tmp_path / "out.exr", "--model", model_file)
+    assert r.exit_code == 2 and "negative depth 'Z'" in r.output and str(tmp_path / "neg.exr") in r.output
+    assert not (tmp_path / "out.exr").exists()
+    one = img.values.copy()
+    one[0, z] = -1.0
+    write_deep(tmp_path / "one.exr", img.with_values(one))
+    r = run("denoise", tmp_path / "one.exr", "-o", tmp_path / "one_out.exr", "--model", model_file)
+    assert r.exit_code == 0 and "1 bin(s) with a negative depth" in r.output, r.output
+    r = run("denoise", tmp_path / "one.exr", "-o", tmp_path / "strict.exr", "--model", model_file, "--strict")
+    assert r.exit_code == 2 and not (tmp_path / "strict.exr").exists()
