@@ -95,9 +95,7 @@ def merge_values(values: np.ndarray, groups: Groups, how: str) -> np.ndarray:
     """[M, C] of per-bin [N, C]: "composite" (sum of T_i v_i), "sum" or "mean" (weighted by the shares)."""
     v = np.asarray(values, np.float64).reshape(len(groups.index), -1)
     w = {"composite": groups.trans, "sum": np.ones_like(groups.trans), "mean": groups.share}[how]
-    out = np.zeros((groups.merged, v.shape[1]))
-    np.add.at(out, groups.index, v * w[:, None])
-    return out
+    return np.stack([np.bincount(groups.index, v[:, j] * w, minlength=groups.merged) for j in range(v.shape[1])], 1)
 
 
 def merge(srt: DeepImage, groups: Groups) -> DeepImage:
