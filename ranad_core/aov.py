@@ -97,8 +97,7 @@ def denoise_aovs(model, images: list, centre: int, mapping: ChannelMap, layers: 
     pass merged (binmerge: its gap, per frame the group of each sorted bin or None, the centre's share-back
     factors): the AOVs are merged and shared back the same way."""
     from . import binmerge
-    from .denoise import merged_groups
-    from .denoise import is_cross_frame
+    from .denoise import is_cross_frame, merged_groups
     from .motion import compensate
 
     cross = is_cross_frame(model)
