@@ -56,7 +56,8 @@ def main() -> None:
     res = denoise_window(model, [img], 0, mapping, want_embeddings=True)
     primary = time.perf_counter() - t
     t = time.perf_counter()
-    out = denoise_aovs(model, [img], 0, mapping, layers, res.embeddings, res.perms, res.offsets)
+    out = denoise_aovs(model, [img], 0, mapping, layers, res.embeddings, res.perms, res.offsets, None, res.merge_gap,
+                       res.merges, res.split)
     reuse = time.perf_counter() - t
     t = time.perf_counter()
     for g in range(a.groups):                              # each group as the beauty of its own primary pass

@@ -123,6 +123,9 @@ def denoise_aovs(model, images: list, centre: int, mapping: ChannelMap, layers: 
                                                .astype(np.float32)) for name, t in vals[-1].items()}
             if k == centre:
                 centre_groups = groups
+        rows = int(np.asarray(offsets[k])[-1])
+        if any(t.shape[0] != rows for t in vals[-1].values()) or len(embeddings[k]) != rows:
+            raise RanadError("the AOV frames do not match the cached bins (merged thin bins not given?)", None)
         vals[-1] = {name: t.to(dev) for name, t in vals[-1].items()}
         layout = Layout.of(torch.as_tensor(offsets[k]), h, w)
         mod = modulation(srt)   # what the primary pass demodulated the diffuse layer by (demodulating models)

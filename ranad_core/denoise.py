@@ -350,10 +350,9 @@ def _denoise_window(model, images, centre, mapping, tile, halo, keep_noisy, want
     else:
         moved, dropped = images, 0
     with stage("inputs"):
-        # thin bins are merged in the centre only: a neighbour's moved bins are what the cross-frame models trained
-        # on (several source bins of one object may land in a pixel at nearly one depth), merged or not
-        frames = [_model_frame(m, mapping, features, p, merge_gap if i == centre else 0.0)
-                  for i, (m, p) in enumerate(zip(moved, carried))]
+        # thin bins are merged in every frame of the window (a thin neighbour left as it is costs the cross-frame
+        # model: runs/bin-merge-s15)
+        frames = [_model_frame(m, mapping, features, p, merge_gap) for m, p in zip(moved, carried)]
     c = frames[centre]
     n = c.srt.num_bins
     h, w = c.srt.height, c.srt.width

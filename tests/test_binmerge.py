@@ -17,6 +17,7 @@ from ranad_core import binmerge
 from ranad_core.aov import aov_layers, denoise_aovs
 from ranad_core.channels import canonical, detect
 from ranad_core.deep import DeepImage, flatten
+from ranad_core.errors import RanadError
 from ranad_core.denoise import denoise_window
 from ranad_core.exr import read_deep, write_deep
 from ranad_core.model import RaNAD, feature_dim, get_config
@@ -197,6 +198,8 @@ def test_light_groups_sum_to_the_denoised_beauty_through_merged_bins(kind):
     scale = np.abs(rgb_d).max()
     assert np.abs(lg_d - rgb_d).max() < 1e-5 * scale
     assert np.abs(lg_d - lg).max() > 1e-2 * scale
+    with pytest.raises(RanadError, match="merged thin bins not given"):   # the merges are not optional
+        denoise_aovs(model, images, centre, detect(frames[1]), layers, res.embeddings, res.perms, res.offsets)
 
 
 def test_aov_command_through_the_cache_of_merged_bins(tmp_path):

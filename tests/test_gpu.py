@@ -76,7 +76,8 @@ def _run(model_name: str, device: str, frames: list, tile: int = 32):
     images, centre = (frames, 1) if is_cross_frame(model) else ([frames[1]], 0)
     res = denoise_window(model, images, centre, tile=tile, want_embeddings=True)
     layers = aov_layers(frames[1].channels, "lg_*")
-    aovs = denoise_aovs(model, images, centre, detect(frames[1]), layers, res.embeddings, res.perms, res.offsets)
+    aovs = denoise_aovs(model, images, centre, detect(frames[1]), layers, res.embeddings, res.perms, res.offsets,
+                       None, res.merge_gap, res.merges, res.split)
     return res, aovs
 
 
