@@ -5,7 +5,7 @@ KIND: rotnormal (normals in another frame: one fixed rotation), flipnormal, noau
 (R G B A Z ZBack only), nocov (no coverage channel, as renderers write), albedo1 (albedo 1 where covered),
 depth1000 (depths in other units, references too), split2 (every bin as two coincident-ish bins 0.1% apart that
 composite to it, references too), base (a copy)."""
-import json, shutil, sys
+import json, sys
 from pathlib import Path
 import numpy as np
 from ranad_core.exr import read_deep, write_deep
