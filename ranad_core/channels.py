@@ -157,7 +157,8 @@ class ChannelMap:
 
     def describe(self) -> dict:
         d = {"beauty": ",".join(self.beauty), "alpha": self.alpha, "depth": self.depth,
-             "depth_back": self.depth_back or "-"}
+             "depth_back": self.depth_back or "-",
+             "coverage": self.coverage or "from the alphas"}   # model.inputs.contribution where a file has none
         d.update({k: describe_layer(v) for k, v in self.layers.items()})
         d["motion"] = self.motion.describe()
         if self.preset:

@@ -43,3 +43,16 @@ def test_a_file_without_coverage_denoises_like_the_file_with_it():
     rgba = [full.channels.index(c) for c in ("R", "G", "B", "A")]
     a, b = flatten(full)[..., rgba], flatten(without)[..., [without.channels.index(c) for c in ("R", "G", "B", "A")]]
     assert np.abs(a - b).max() < 5e-3 * np.abs(a).max()
+
+
+def test_info_says_where_coverage_comes_from(tmp_path):
+    from click.testing import CliRunner
+
+    from ranad_cli.main import cli
+    from ranad_core.exr import write_deep
+
+    img = read_deep(SHOT)
+    write_deep(tmp_path / "bare.exr", img.select([c for c in img.channels if c != "coverage"]))
+    run = lambda p: CliRunner().invoke(cli, ["info", str(p)]).output  # noqa: E731
+    assert "coverage=coverage" in run(SHOT)
+    assert "coverage=from the alphas" in run(tmp_path / "bare.exr")
