@@ -97,7 +97,7 @@ def denoise_aovs(model, images: list, centre: int, mapping: ChannelMap, layers: 
     pass merged (binmerge: its gap, per frame the group of each sorted bin or None, the centre's share-back
     factors): the AOVs are merged and shared back the same way."""
     from . import binmerge
-    from .denoise import is_cross_frame, merged_groups
+    from .denoise import is_cross_frame
     from .motion import compensate
 
     cross = is_cross_frame(model)
@@ -114,7 +114,7 @@ def denoise_aovs(model, images: list, centre: int, mapping: ChannelMap, layers: 
         cached = merges[k] if merges else None
         groups = None
         if cached is not None:   # the groups of the primary pass, which merged after its NaN/Inf policy
-            groups = merged_groups(replace_nonfinite(srt, DEPTHS)[0], img, srt_perm, merge_gap)
+            groups = binmerge.groups_of(replace_nonfinite(srt, DEPTHS)[0], img, srt_perm, merge_gap)
         if (groups is None) != (cached is None) or (groups is not None and not np.array_equal(groups.index, cached)):
             raise RanadError("the AOV frames do not match the cached bin merges (another render?)", None)
         if groups is not None:

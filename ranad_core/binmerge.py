@@ -29,7 +29,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .channels import ALPHA, COVERAGE, DEPTH, DEPTH_BACK, DIFFUSE, EMISSION, SPECULAR
-from .deep import DeepImage
+from .deep import DeepImage, segment_exclusive_cumsum, transmittance
 
 MERGE_GAP = 0.025  # below the 3% jump between ranad's training bins: its own data never merges
 
@@ -53,6 +53,17 @@ class Groups:
     @property
     def merged(self) -> int:
         return int(self.offsets[-1])
+
+    @property
+    def members(self) -> np.ndarray:
+        """[M + 1] the groups as runs of the sorted bins: group g holds bins members[g] .. members[g + 1] - 1."""
+        return np.flatnonzero(np.r_[True, self.index[1:] != self.index[:-1], True])
+
+
+def groups_of(srt: DeepImage, img: DeepImage, perm: np.ndarray, gap: float | None = None) -> "Groups | None":
+    """find_groups of `srt`, the sorted canonical image of `img` (`perm`: the sort), with `img`'s object ids kept
+    apart; `gap` None: MERGE_GAP."""
+    return find_groups(srt, {k: np.asarray(v)[perm] for k, v in img.ids.items()}, MERGE_GAP if gap is None else gap)
 
 
 def find_groups(srt: DeepImage, ids: dict | None = None, gap: float = MERGE_GAP) -> Groups | None:
@@ -79,11 +90,7 @@ def find_groups(srt: DeepImage, ids: dict | None = None, gap: float = MERGE_GAP)
     counts = np.bincount(pix[starts], minlength=srt.num_pixels)
     offsets = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
     a = np.clip(srt.channel(ALPHA).astype(np.float64), 0, 1)
-    # T_i: product of (1 - a_j) over the members in front of i (log space, exclusive cumulative sum per group)
-    la = np.log(np.maximum(1 - a, 1e-30))
-    cum = np.cumsum(la)
-    before = cum - la
-    trans = np.exp(before - np.repeat(before[starts], np.diff(np.append(starts, n))))
+    trans = transmittance(a, np.append(starts, n))   # T_i over the members in front of i, within its group
     contrib = trans * a
     total = np.bincount(index, contrib, minlength=m)
     size = np.bincount(index, minlength=m).astype(np.float64)
@@ -101,8 +108,7 @@ def merge_values(values: np.ndarray, groups: Groups, how: str) -> np.ndarray:
 def merge(srt: DeepImage, groups: Groups) -> DeepImage:
     """The canonical image with each group composited into one bin (module docstring)."""
     cols = []
-    first = np.flatnonzero(np.r_[True, groups.index[1:] != groups.index[:-1]])
-    last = np.r_[first[1:] - 1, len(groups.index) - 1]
+    first, last = groups.members[:-1], groups.members[1:] - 1
     for c in srt.channels:
         v = srt.channel(c)
         if c == ALPHA:
@@ -127,10 +133,7 @@ def merge(srt: DeepImage, groups: Groups) -> DeepImage:
 def split_factors(groups: Groups, alpha: np.ndarray) -> np.ndarray:
     """[N] f_i = rho_i / T'_i for the denoised groups' alphas `alpha` [M] (module docstring)."""
     a = np.clip(np.asarray(alpha, np.float64).reshape(-1), 0, 1)[groups.index]
-    cum = np.cumsum(groups.share)
-    first = np.flatnonzero(np.r_[True, groups.index[1:] != groups.index[:-1]])
-    size = np.diff(np.append(first, len(groups.index)))
-    in_front = cum - groups.share - np.repeat((cum - groups.share)[first], size)
+    in_front = segment_exclusive_cumsum(groups.share, groups.members)   # shares of the members in front
     t = np.maximum(1 - a * in_front, 0)
     # a member hidden behind opaque ones (T'_i = 0) is invisible whatever it holds: it gets the group as is
     return np.where(t > 1e-6, groups.share / np.maximum(t, 1e-6), 1.0)
@@ -150,7 +153,6 @@ def split_alpha(alpha: np.ndarray, groups: Groups, factors: np.ndarray) -> np.nd
 def split_depth(z_new: np.ndarray, groups: Groups) -> np.ndarray:
     """[N] members' depths: each its own, moved by its group's denoised front depth over the noisy one."""
     z_new = np.asarray(z_new, np.float64).reshape(-1)
-    first = np.flatnonzero(np.r_[True, groups.index[1:] != groups.index[:-1]])
-    front = groups.z[first]
+    front = groups.z[groups.members[:-1]]
     ratio = np.where(np.abs(front) > 0, z_new / np.where(np.abs(front) > 0, front, 1), 1.0)
     return (groups.z * ratio[groups.index]).astype(np.float32)

@@ -386,7 +386,7 @@ def _ranges(starts: np.ndarray, counts: np.ndarray) -> np.ndarray:
     return np.repeat(np.asarray(starts, dtype=np.int64) - first, counts) + np.arange(total, dtype=np.int64)
 
 
-def _seg_exclusive_cumsum(x: np.ndarray, offsets: np.ndarray) -> np.ndarray:
+def segment_exclusive_cumsum(x: np.ndarray, offsets: np.ndarray) -> np.ndarray:
     """Per-pixel exclusive prefix sums of per-bin ``x`` (float64 or int64): global cumsum minus segment base."""
     counts = np.diff(offsets)
     cs = np.cumsum(x)
@@ -716,16 +716,17 @@ def _merge_channels(vals: np.ndarray, rows: np.ndarray, starts: np.ndarray, role
 
 
 # ---- flatten ----------------------------------------------------------------------------------------------
-def _transmittance(alpha: np.ndarray, offsets: np.ndarray) -> np.ndarray:
-    """float64 [N]: prod over earlier bins of the pixel of (1 - alpha); exactly 0 behind an opaque bin.
+def transmittance(alpha: np.ndarray, offsets: np.ndarray) -> np.ndarray:
+    """float64 [N]: prod over earlier bins of the segment (a pixel, or any run of bins `offsets` delimits) of
+    (1 - alpha); exactly 0 behind an opaque bin.
 
     Log-space segmented prefix sums (float64) for the non-opaque factors, and a segmented count of opaque
     bins so that anything behind alpha >= 1 is exactly 0 instead of exp(-inf) arithmetic.
     """
     a = np.clip(alpha.astype(np.float64), 0.0, 1.0)
     opaque = a >= 1.0
-    s = _seg_exclusive_cumsum(np.log1p(-np.where(opaque, 0.0, a)), offsets)
-    k = _seg_exclusive_cumsum(opaque.astype(np.int64), offsets)
+    s = segment_exclusive_cumsum(np.log1p(-np.where(opaque, 0.0, a)), offsets)
+    k = segment_exclusive_cumsum(opaque.astype(np.int64), offsets)
     return np.exp(s) * (k == 0)
 
 
@@ -782,7 +783,7 @@ def _flatten_chunk(vals, offsets, roles, cov_col, depth) -> np.ndarray:
     out = np.zeros((p, c), dtype=np.float64)
     groups, no_alpha = _alpha_groups(roles)
     for a_col, members in groups:
-        t = _transmittance(vals[:, a_col], offsets)
+        t = transmittance(vals[:, a_col], offsets)
         for col in [a_col, *members]:
             out[:, col] = np.bincount(pix, weights=vals[:, col] * t, minlength=p)
     for col in no_alpha:
@@ -796,7 +797,7 @@ def _flatten_chunk(vals, offsets, roles, cov_col, depth) -> np.ndarray:
             opaque = np.zeros(n, dtype=bool)
         else:
             opaque = cov >= 1.0
-            contrib = (cov > 0) & (_seg_exclusive_cumsum(opaque.astype(np.int64), offsets) == 0)
+            contrib = (cov > 0) & (segment_exclusive_cumsum(opaque.astype(np.int64), offsets) == 0)
         idx = np.flatnonzero(contrib)
         pc = pix[idx]
         change = pc[1:] != pc[:-1]

@@ -229,7 +229,7 @@ def _model_frame(img: DeepImage, mapping: ChannelMap, features: str = "log1p", p
     with stage("inputs/sort and prior"):
         srt, perm = canon.sorted()
         res = residual[perm] if residual is not None else None
-        groups = merged_groups(srt, img, perm, merge_gap)
+        groups = binmerge.groups_of(srt, img, perm, merge_gap)
         if groups is not None:
             srt = binmerge.merge(srt, groups)
             if res is not None:
@@ -243,13 +243,6 @@ def _model_frame(img: DeepImage, mapping: ChannelMap, features: str = "log1p", p
             srt = with_prior(srt, res, presorted=True)
             scale = frame_scale(srt)
     return _Frame(srt, perm, res, depth_stats(srt), nonfinite, features, scale, groups)
-
-
-def merged_groups(srt: DeepImage, img: DeepImage, perm: np.ndarray, merge_gap: float | None) -> Groups | None:
-    """binmerge's groups of the sorted canonical `srt` of `img` (whose object ids keep different objects apart),
-    None when nothing merges."""
-    gap = binmerge.MERGE_GAP if merge_gap is None else merge_gap
-    return binmerge.find_groups(srt, {k: np.asarray(v)[perm] for k, v in img.ids.items()}, gap)
 
 
 @dataclass

@@ -82,7 +82,7 @@ def test_training_like_bins_never_merge():
     have nothing within the default gap, so merging leaves them, and every model score, as they were."""
     for img in (frame(0), frame(1), read_deep(STACK)):
         srt, perm = sorted_canonical(img)
-        assert binmerge.find_groups(srt, {k: v[perm] for k, v in img.ids.items()}) is None
+        assert binmerge.groups_of(srt, img, perm) is None
 
 
 def _pixel(zs, alphas, zbacks=None, ids=None):

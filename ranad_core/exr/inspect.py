@@ -45,12 +45,12 @@ def guess_kind(image: DeepImage) -> str:
 def thin_bins(image: DeepImage) -> int:
     """Bins that `ranad denoise` merges into the bin in front of them at the default gap (binmerge): thin bins of
     one surface, as renderers that merge a pixel's samples less than ranad's training data write."""
-    from ..binmerge import find_groups
+    from ..binmerge import groups_of
 
     if image.num_bins < 2 or "A" not in image.channels or "Z" not in image.channels:
         return 0
     srt, perm = image.sorted()
-    groups = find_groups(srt, {k: v[perm] for k, v in image.ids.items()})
+    groups = groups_of(srt, image, perm)
     return 0 if groups is None else image.num_bins - groups.merged
 
 

@@ -19,7 +19,7 @@ for root in args:
     for f in files:
         img = read_deep(f)
         srt, perm = canonical(img, detect(img))[0].sorted()
-        g = binmerge.find_groups(srt, {k: v[perm] for k, v in img.ids.items()}, gap)
+        g = binmerge.groups_of(srt, img, perm, gap)
         bins += img.num_bins
         merged += 0 if g is None else img.num_bins - g.merged
     print(f"{root}: {len(files)} files, {bins} bins, {merged} merged away at gap {gap}")

@@ -11,7 +11,7 @@ from ranad_core.exr import read_deep
 for path in sys.argv[1:]:
     img = read_deep(path)
     srt, perm = img.sorted()
-    g = binmerge.find_groups(srt, {k: v[perm] for k, v in img.ids.items()})
+    g = binmerge.groups_of(srt, img, perm)
     if g is None:
         print(f"{path}: no thin bins")
         continue
