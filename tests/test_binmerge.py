@@ -25,11 +25,11 @@ from ranad_core.model.crossframe import CrossFrameRaNAD
 from ranad_core.model.store import load_model
 
 from model_factory import input_keys_config
+from test_aov import GROUPS, exact_groups, sums
 
 ROOT = Path(__file__).resolve().parents[1]
 SHOT = ROOT / "examples" / "synth_shot"
 STACK = Path(__file__).resolve().parent / "data" / "ranad-synth" / "layer_stack_noisy_spp16.exr"
-GROUPS = ("lg_key", "lg_fill", "lg_rim")
 COLOURS = ("R", "G", "B", "diffuse.", "specular.", "emission.", "lg_")
 
 
@@ -155,21 +155,6 @@ def test_thin_bins_denoise_like_whole_surface_bins():
     off = denoise_window(model, [fine], 0, merge_gap=0)
     assert off.merges is None
     assert np.abs(flatten(off.image)[..., rgb] - whole[..., rgb]).max() > 2e-2 * scale
-
-
-def exact_groups(img):
-    ch = img.channels
-    vals = img.values.astype(np.float32).copy()
-    for c in "RGB":
-        vals[:, ch.index(f"lg_rim.{c}")] = (vals[:, ch.index(c)] - vals[:, ch.index(f"lg_key.{c}")]
-                                            - vals[:, ch.index(f"lg_fill.{c}")])
-    return img.with_values(vals)
-
-
-def sums(img):
-    ch = img.channels
-    lg = sum(img.values[:, [ch.index(f"{g}.{c}") for c in "RGB"]].astype(np.float64) for g in GROUPS)
-    return lg, img.values[:, [ch.index(c) for c in "RGB"]].astype(np.float64)
 
 
 def _models():
