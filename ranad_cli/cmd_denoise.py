@@ -12,6 +12,7 @@ from tqdm import tqdm
 
 from .params import device_option
 from ranad_core.binmerge import MERGE_GAP
+from ranad_core.darkness import DARK_RADIUS
 from ranad_core.errors import RanadError
 
 
@@ -69,6 +70,11 @@ def parse_bytes(text: str) -> float:
                    "same object ids) are denoised as one bin and shared back, as the model's training bins hold "
                    "whole surfaces: renderers that merge less than 3% get the quality of ones that do. Output "
                    "keeps every input bin; 0 turns it off.")
+@click.option("--dark-radius", "dark_radius", type=click.IntRange(0, 8), default=DARK_RADIUS, show_default=True,
+              help="A pixel whose noisy colour is exactly black, as is every pixel within this many pixels of it, "
+                   "stays exactly black (beauty and AOVs; alpha and depth are denoised): a black neighbourhood "
+                   "means no light, and the kernels would spread a faint glow of lit neighbours into it. A "
+                   "black pixel among lit ones is still filled in. 0 turns it off.")
 @click.option("--tile", type=click.IntRange(16), default=None,
               help="Tile size in pixels (default: the tiling that fits --max-memory with the fewest bins "
                    "computed twice in the halos; on the CPU, windows of at most 0.8 M bins).")
@@ -108,8 +114,8 @@ def parse_bytes(text: str) -> float:
                    "flat prior, per-tile gather / backbone / reconstruction / scatter, assemble, AOVs, cache, "
                    "write) and a per-tile summary (bins with the halo, halo overlap, seconds per tile).")
 def denoise_cmd(inputs, output, frames, model, device, threads, kind, maps, preset, motion_units, fps, shutter,
-                motion_y, keep_noisy, keep_depth, bin_merge, tile, halo, max_memory, cache_dir, skip_existing, shard,
-                strict, window, aovs, reference, parts, flow, flow_direction, flow_channels, profile):
+                motion_y, keep_noisy, keep_depth, bin_merge, dark_radius, tile, halo, max_memory, cache_dir,
+                skip_existing, shard, strict, window, aovs, reference, parts, flow, flow_direction, flow_channels, profile):
     """Denoise deep EXR INPUTS (files or patterns such as beauty.####.exr) into deep EXRs with the same pixels,
     bins, bin order, channels, ids and header: diffuse, specular, alpha and depth are denoised and the beauty
     is rebuilt from them.
@@ -153,7 +159,8 @@ def denoise_cmd(inputs, output, frames, model, device, threads, kind, maps, pres
         except OSError as e:
             raise RanadError(f"cannot create the cache folder ({e.strerror or e})", cache_dir) from None
     opts = ShotOptions(model_spec=model, overrides=overrides, tile=tile, halo=halo, max_memory=budget,
-                       keep_noisy=keep_noisy, keep_depth=keep_depth, bin_merge=bin_merge, cache_dir=cache_dir,
+                       keep_noisy=keep_noisy, keep_depth=keep_depth, bin_merge=bin_merge, dark_radius=dark_radius,
+                       cache_dir=cache_dir,
                        skip_existing=skip_existing, strict=strict,
                        aovs=aovs, kind=kind, parts=tuple(parts), flow=flow, flow_direction=flow_direction,
                        flow_channels=None if flow_channels is None else

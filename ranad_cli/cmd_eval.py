@@ -39,8 +39,10 @@ from .params import int_list
                    "are scaled back before scoring, so rows at different exposures compare directly.")
 @click.option("--bin-merge", "bin_merge", type=click.FloatRange(0, 0.5), default=None,
               help="ranad's thin-bin merging gap, as `ranad denoise --bin-merge` (default: its default; 0: off).")
+@click.option("--dark-radius", "dark_radius", type=click.IntRange(0, 8), default=None,
+              help="ranad's black neighbourhoods, as `ranad denoise --dark-radius` (default: its default; 0: off).")
 def eval_cmd(dataset, out, model, spp, kinds, scenes, grid_pairs, temporal, cross_model, window, held_out,
-             exposures, bin_merge):
+             exposures, bin_merge, dark_radius):
     """Evaluate on DATASET (the output of `ranad synth` with other seeds than the training data): for every
     scene, deep kind and spp, the noisy input, flat OIDN, OIDN then recolour (the studio workflow) and ranad
     are scored against the reference: SMAPE, DSSIM and HDR-FLIP of the flattened beauty; per-bin SMAPE; a
@@ -69,7 +71,7 @@ def eval_cmd(dataset, out, model, spp, kinds, scenes, grid_pairs, temporal, cros
         raise RanadError(f"cannot create the output folder ({e.strerror or e})", out) from None
     with tqdm(total=total, desc="eval", unit="pair") as bar:
         result = ev.evaluate(dataset, loaded.model, spps, kinds, scenes, grid_pairs, bar.update, stops, held,
-                             bin_merge)
+                             bin_merge, dark_radius)
     name = os.path.basename(os.path.normpath(dataset))
     n_scenes = len({r["scene"] for r in result.rows})
     if held or stops != (0,):

@@ -7,6 +7,7 @@ import json
 import click
 
 from ranad_core.binmerge import MERGE_GAP
+from ranad_core.darkness import DARK_RADIUS
 
 from ranad_core.exr.inspect import describe
 from ranad_core.exr.sequence import expand_inputs
@@ -55,6 +56,10 @@ def _print_text(d: dict) -> None:
             share = 100 * p["thin_bins"] / max(p["bins"], 1)
             click.echo(f"    thin bins: {p['thin_bins']} ({share:.1f}%) lie within {100 * MERGE_GAP:g}% in depth of "
                        "the bin in front (same ids): ranad denoise merges them (--bin-merge)")
+        if p.get("dark_pixels"):
+            share = 100 * p["dark_pixels"] / max(w * h, 1)
+            click.echo(f"    black neighbourhoods: {p['dark_pixels']} pixels ({share:.1f}%) are exactly black, as are "
+                       f"their neighbours within {DARK_RADIUS}: ranad denoise keeps them black (--dark-radius)")
         if p["nonfinite_values"]:
             click.echo(f"    WARNING: {p['nonfinite_values']} NaN/Inf sample values")
 

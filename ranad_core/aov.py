@@ -25,6 +25,7 @@ import fnmatch
 import numpy as np
 import torch
 
+from . import darkness
 from .channels import ALIASES, DEPTH, DEPTHS, EMISSION, RGB, SPECULAR, ChannelMap, canonical
 from .deep import DeepImage, replace_nonfinite, unsort
 from .errors import RanadError
@@ -88,14 +89,15 @@ def _values(img: DeepImage, m: ChannelMap, layers: dict, perm: np.ndarray) -> di
 
 def denoise_aovs(model, images: list, centre: int, mapping: ChannelMap, layers: dict, embeddings: list,
                  perms: list, offsets: list, flows: list | None = None, merge_gap: float = 0.0,
-                 merges: list | None = None, split: np.ndarray | None = None) -> dict:
+                 merges: list | None = None, split: np.ndarray | None = None, dark_radius: int = 0) -> dict:
     """Denoised AOV layers of frame `centre`: layer -> [N, 3] in the file's bin order.
 
     images: the window's frames holding the beauty channels the mapping names and the AOV channels, not yet
     motion-compensated; embeddings/perms/offsets: per window frame, as the primary pass made them (the cache);
     flows: the per-pixel flows the primary pass used, if any; merge_gap/merges/split: the thin bins the primary
     pass merged (binmerge: its gap, per frame the group of each sorted bin or None, the centre's share-back
-    factors): the AOVs are merged and shared back the same way."""
+    factors): the AOVs are merged and shared back the same way; dark_radius: the primary pass's (darkness): the
+    bins it kept black keep their noisy AOVs."""
     from . import binmerge
     from .denoise import is_cross_frame
     from .motion import compensate
@@ -158,7 +160,22 @@ def denoise_aovs(model, images: list, centre: int, mapping: ChannelMap, layers: 
             raise RanadError("the cache's share-back factors do not match its bin merges (a damaged cache?)", None)
         out = binmerge.split(out, centre_groups, factors)
     out = unsort(out, perms[centre])
+    noisy = replace_nonfinite(images[centre], mapping.depth_channels())[0]   # the primary pass's _assemble input
+    dark = darkness.dark_bins(noisy, mapping, dark_radius)
+    if dark is not None:
+        out[dark] = np.stack([noisy.channel(c) for chans in layers.values() for c in chans], 1)[dark]
     return {layer: out[:, 3 * i:3 * i + 3] for i, layer in enumerate(layers)}
+
+
+def _dark_radius(meta: dict, cache_path: str) -> int:
+    """The cache's darkness radius ("0" for caches written before it existed: their pass kept nothing black)."""
+    try:
+        radius = int(meta.get("dark_radius", "0"))
+    except ValueError:
+        radius = -1
+    if radius < 0:
+        raise RanadError(f"dark_radius {meta.get('dark_radius')!r} is not a radius (a damaged cache?)", cache_path)
+    return radius
 
 
 def denoise_cached_frame(loaded, cache_path: str, tensors: dict, meta: dict, pattern: str, aov_files: list):
@@ -201,7 +218,7 @@ def denoise_cached_frame(loaded, cache_path: str, tensors: dict, meta: dict, pat
                               [tensors[f"embeddings.{i}"] for i in range(k)],
                               [tensors[f"perm.{i}"] for i in range(k)], [tensors[f"offsets.{i}"] for i in range(k)],
                               None, float(meta.get("merge_gap", "0")), merges if any(x is not None for x in merges)
-                              else None, tensors.get("split"))
+                              else None, tensors.get("split"), _dark_radius(meta, cache_path))
     except RanadError as e:   # the cache and the files disagree: name the cache
         if e.path is None:
             raise RanadError(e.problem, cache_path) from None

@@ -17,7 +17,7 @@ to rerun on other values:
   of the centre's bin layout and depths: SHA-256 of offsets and Z), `mapping` (JSON of the channel map),
   `overrides` (JSON of the --map overrides, so `ranad aov` maps the channels the same way), `tile`, `halo`,
   `part` (the part of a multi-part file, by name or index; empty for single-part files), `merge_gap` (the
-  binmerge gap, "0" when nothing merged).
+  binmerge gap, "0" when nothing merged), `dark_radius` (darkness' radius; absent in older caches: 0).
 
 A cache is refused when its format, model id or layout fingerprint does not match what it is used with.
 """
@@ -80,7 +80,8 @@ def write_cache(path: str, img: DeepImage, result, model_id: str, model_spec: st
             "frame": "" if frame is None else str(frame), "layout_sha": layout_fingerprint(img),
             "mapping": json.dumps(result.mapping.describe()), "overrides": json.dumps(overrides or {}),
             "tile": str(tile), "halo": str(halo), "part": part or "",
-            "merge_gap": repr(float(result.merge_gap)) if result.merges else "0"}
+            "merge_gap": repr(float(result.merge_gap)) if result.merges else "0",
+            "dark_radius": str(int(result.dark_radius))}
     with atomic_output(path) as tmp:
         save_file(tensors, tmp, metadata=meta)
 

@@ -25,7 +25,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import torch
 
-from . import binmerge
+from . import binmerge, darkness
 from .binmerge import Groups
 from .channels import (ALPHA, DEPTH, DEPTH_BACK, DEPTHS, FLAT_NOISY, PRIOR, ChannelMap, canonical, detect,
                        layer_values, split_layer)
@@ -52,6 +52,7 @@ class FrameResult:
     merges: list | None = None           # per window frame: binmerge group of each sorted bin, or None (no merge)
     split: np.ndarray | None = None      # the centre's binmerge.split_factors (None: nothing merged)
     merge_gap: float = 0.0               # the binmerge gap the frames were merged with
+    dark_radius: int = 0                 # darkness: exactly black neighbourhoods of this radius kept black (0: off)
 
     @property
     def perm(self):
@@ -292,7 +293,8 @@ def denoise_frame(model, img: DeepImage, mapping: ChannelMap | None = None, tile
 def denoise_window(model, images: list, centre: int, mapping: ChannelMap | None = None, tile: int | None = None,
                    halo: int | None = None, keep_noisy: str | None = None, want_embeddings: bool = False,
                    progress=None, flows: list | None = None, priors: list | None = None,
-                   keep_depth: bool = False, merge_gap: float | None = None) -> FrameResult:
+                   keep_depth: bool = False, merge_gap: float | None = None,
+                   dark_radius: int | None = None) -> FrameResult:
     """Denoise frame `centre` of `images` (a window of consecutive frames; neighbours are motion-compensated onto
     it, in display coordinates where their data windows differ). `tile`: tile size in pixels (None: the whole
     frame); `halo`: None for the model's receptive field; `keep_noisy`: a prefix under which the noisy versions
@@ -304,6 +306,8 @@ def denoise_window(model, images: list, centre: int, mapping: ChannelMap | None 
     keeps across the windows of a shot (shot.py) and this fills in where None. `keep_depth`: the depth layer is
     not reconstructed and the file's depths are written as they are. `merge_gap`: thin bins of one surface within
     this relative depth gap are denoised as one and shared back (binmerge; None: its default, 0: off).
+    `dark_radius`: pixels exactly black, as is every pixel within this radius, keep their black colour (darkness;
+    None: its default, 0: off).
 
     Tiles run where the model is (`model.to("cuda")`: `ranad denoise --device cuda`), and so does the flat prior's
     OIDN; inputs are prepared and outputs assembled on the CPU."""
@@ -313,11 +317,12 @@ def denoise_window(model, images: list, centre: int, mapping: ChannelMap | None 
     with oidn_on(device.type):
         return _denoise_window(model, images, centre, mapping, tile, halo, keep_noisy, want_embeddings, progress,
                                flows, priors, keep_depth, device,
-                               binmerge.MERGE_GAP if merge_gap is None else float(merge_gap))
+                               binmerge.MERGE_GAP if merge_gap is None else float(merge_gap),
+                               darkness.DARK_RADIUS if dark_radius is None else int(dark_radius))
 
 
 def _denoise_window(model, images, centre, mapping, tile, halo, keep_noisy, want_embeddings, progress, flows,
-                    priors, keep_depth, device, merge_gap) -> FrameResult:
+                    priors, keep_depth, device, merge_gap, dark_radius) -> FrameResult:
     from .motion import compensate
 
     cross = is_cross_frame(model)
@@ -400,7 +405,7 @@ def _denoise_window(model, images, centre, mapping, tile, halo, keep_noisy, want
         if c.groups is not None and n:
             alpha = outs["alpha"] if "alpha" in outs else c.srt.channel(ALPHA)
             factors = binmerge.split_factors(c.groups, alpha)
-        out = _assemble(img, mapping, c.srt, c.perm, outs, keep_noisy, c.groups, factors) if n else img
+        out = _assemble(img, mapping, c.srt, c.perm, outs, keep_noisy, c.groups, factors, dark_radius) if n else img
     if want_embeddings:
         def width(f):
             return model.embedding_width(f == centre, len(frames)) if cross else model.embedding_width()
@@ -410,13 +415,16 @@ def _denoise_window(model, images, centre, mapping, tile, halo, keep_noisy, want
     merges = [None if fr.groups is None else fr.groups.index for fr in frames]
     return FrameResult(out, img.num_bins, c.nonfinite, tiles, embs, [fr.perm for fr in frames],
                        [fr.stats for fr in frames], [fr.srt.offsets for fr in frames], mapping, dropped,
-                       merges if any(g is not None for g in merges) else None, factors, merge_gap, centre)
+                       merges if any(g is not None for g in merges) else None, factors, merge_gap, dark_radius,
+                       centre)
 
 
 def _assemble(img: DeepImage, m: ChannelMap, srt: DeepImage, perm: np.ndarray, outs: dict,
-              keep_noisy: str | None, groups: Groups | None = None, factors: np.ndarray | None = None) -> DeepImage:
+              keep_noisy: str | None, groups: Groups | None = None, factors: np.ndarray | None = None,
+              dark_radius: int = 0) -> DeepImage:
     """The output image: the file's channels with the denoised layers written back (file bin order). `groups`,
-    `factors`: merged thin bins (binmerge) shared back among their members before anything is written."""
+    `factors`: merged thin bins (binmerge) shared back among their members before anything is written;
+    `dark_radius`: darkness.dark_bins' radius (their colour is written as it was, 0)."""
     img = replace_nonfinite(img, m.depth_channels())[0]    # one NaN/Inf policy for every channel of the output
     file_vals = img.values.copy()
     ch = img.channels
@@ -443,6 +451,10 @@ def _assemble(img: DeepImage, m: ChannelMap, srt: DeepImage, perm: np.ndarray, o
     else:
         beauty = diffuse[:, :3] + emission
     write(m.beauty, beauty)
+    dark = darkness.dark_bins(img, m, dark_radius)
+    if dark is not None:
+        cols = [ch.index(c) for c in darkness.colour_channels(m)]
+        file_vals[np.ix_(dark, cols)] = img.values[np.ix_(dark, cols)]
     if "alpha" in outs:
         alpha = np.clip(outs["alpha"], 0, 1)
         write([m.alpha], np.clip(unsort(alpha if groups is None else binmerge.split_alpha(alpha, groups, factors)

@@ -74,14 +74,16 @@ class Result:
 
 
 def evaluate(dataset: str, model, spps=None, kinds=None, max_scenes: int | None = None, grid_pairs: int = 4,
-             progress=None, exposures=(0,), held_out=(), merge_gap: float | None = None) -> Result:
+             progress=None, exposures=(0,), held_out=(), merge_gap: float | None = None,
+             dark_radius: int | None = None) -> Result:
     """Scores every selected pair; `model` is a RaNAD in eval mode.
 
     exposures: stops by which each noisy input is scaled before every method runs; the outputs are scaled back
     before scoring against the unscaled reference, so each row says how well a method does on the same scene
     rendered brighter or darker. held_out: scene families (synth presets) the model never trained on; rows get
     group "held-out" for them and "in-family" otherwise (the generalization protocol). merge_gap: ranad's
-    thin-bin merging (binmerge; None: its default, 0: off)."""
+    thin-bin merging (binmerge; None: its default, 0: off); dark_radius: its black neighbourhoods (darkness; None:
+    its default, 0: off)."""
     pairs = [p for p in find_pairs(dataset) if (not spps or p.spp in spps) and (not kinds or p.kind in kinds)]
     if max_scenes:
         keep = sorted({p.scene for p in pairs})[:max_scenes]
@@ -101,7 +103,7 @@ def evaluate(dataset: str, model, spps=None, kinds=None, max_scenes: int | None 
         outputs["recolour"] = recolour(noisy, outputs["oidn"])
         seconds["recolour"] = time.perf_counter() - t + seconds["oidn"]
         t = time.perf_counter()
-        outputs["ranad"] = denoise_window(model, [noisy], 0, merge_gap=merge_gap).image
+        outputs["ranad"] = denoise_window(model, [noisy], 0, merge_gap=merge_gap, dark_radius=dark_radius).image
         seconds["ranad"] = time.perf_counter() - t
         outputs["noisy"], seconds["noisy"] = noisy, 0.0
         if stops:  # back to the reference's exposure

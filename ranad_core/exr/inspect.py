@@ -54,6 +54,20 @@ def thin_bins(image: DeepImage) -> int:
     return 0 if groups is None else image.num_bins - groups.merged
 
 
+def dark_pixels(image: DeepImage) -> int:
+    """Pixels `ranad denoise` keeps exactly black at the default radius (darkness: they and their neighbours are
+    exactly black); 0 for files it could not read."""
+    from ..channels import detect
+    from ..darkness import dark_bins
+    from ..errors import RanadError
+
+    try:
+        dark = dark_bins(image, detect(image))
+    except (RanadError, KeyError, ValueError):
+        return 0
+    return 0 if dark is None else int(np.unique(image.pixel_index()[dark]).size)
+
+
 def _deep_stats(image: DeepImage) -> dict[str, Any]:
     counts = image.counts
     covered = counts > 0
@@ -71,6 +85,7 @@ def _deep_stats(image: DeepImage) -> dict[str, Any]:
         "nonfinite_values": nonfinite,
         "measured_state": image.measured_state(),
         "thin_bins": thin_bins(image),
+        "dark_pixels": dark_pixels(image),
     }
 
 

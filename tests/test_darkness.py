@@ -1,0 +1,152 @@
+"""Exactly black neighbourhoods stay black (ranad_core.darkness): which pixels qualify (against a brute-force
+window check), that the default model's leak into them is stopped and nothing else changes, and that light groups
+through the cache keep summing to the beauty with the radius the primary pass used."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from ranad_cli.main import cli
+from ranad_core import darkness
+from ranad_core.channels import ChannelMap, detect
+from ranad_core.deep import DeepImage
+from ranad_core.denoise import denoise_window
+from ranad_core.exr import read_deep, write_deep
+from ranad_core.model.store import load_model
+
+from test_aov import exact_groups, sums
+
+SHOT = Path(__file__).resolve().parents[1] / "examples" / "synth_shot"
+BOX = (8, 28)   # rows and columns 8..27 of the 48 x 48 frame are made black; 9..26 are then dark at radius 1
+RADIANCE = ("R", "G", "B", "diffuse.", "specular.", "emission.", "lg_")
+
+
+def blackened(img: DeepImage) -> DeepImage:
+    """img with every radiance channel of the pixels in BOX x BOX set to exactly 0 (alpha, depth, guides kept):
+    an object over an empty background, as a renderer writes it."""
+    y, x = np.divmod(img.pixel_index(), img.width)
+    inside = (y >= BOX[0]) & (y < BOX[1]) & (x >= BOX[0]) & (x < BOX[1])
+    vals = img.values.copy()
+    for i, c in enumerate(img.channels):
+        if c in RADIANCE[:3] or c.startswith(RADIANCE[3:]):
+            vals[inside, i] = 0
+    return img.with_values(vals)
+
+
+def inner(img: DeepImage, margin: int = 1) -> np.ndarray:
+    y, x = np.divmod(img.pixel_index(), img.width)
+    lo, hi = BOX[0] + margin, BOX[1] - margin
+    return (y >= lo) & (y < hi) & (x >= lo) & (x < hi)
+
+
+def brute_force(lit: np.ndarray, radius: int) -> np.ndarray:
+    """[H, W] dark pixels, pixel by pixel: every pixel of the clipped (2 radius + 1)^2 window unlit, and no speck
+    (a lit pixel with at least SPECK_BLACK unlit pixels among its in-image 8 neighbours) within SPECK_REACH."""
+    h, w = lit.shape
+
+    def window(a, y, x, r):
+        return a[max(0, y - r):y + r + 1, max(0, x - r):x + r + 1]
+
+    speck = np.array([[lit[y, x] and int((~window(lit, y, x, 1)).sum()) >= darkness.SPECK_BLACK
+                       for x in range(w)] for y in range(h)])
+    return np.array([[not window(lit, y, x, radius).any() and not window(speck, y, x, darkness.SPECK_REACH).any()
+                      for x in range(w)] for y in range(h)])
+
+
+@pytest.mark.parametrize("radius", [1, 2, 3])
+def test_dark_pixels_match_a_brute_force_window_check(radius):
+    rng = np.random.default_rng(radius)
+    h, w = 23, 29
+    counts = rng.integers(0, 3, h * w)          # pixels without bins count as black
+    offsets = np.concatenate([[0], np.cumsum(counts)])
+    n = int(offsets[-1])
+    y = np.divmod(np.repeat(np.arange(h * w), counts), w)[0]
+    lit_bin = rng.random(n) < np.where(y < h // 2, 0.9, 0.04)   # a lit half, a sparsely lit half (specks)
+    vals = np.zeros((n, 4), np.float32)
+    vals[:, 3] = 0.5                            # alpha: never read
+    vals[lit_bin, rng.integers(0, 3, n)[lit_bin]] = rng.choice([-1e-7, 1e-30, 2.0], int(lit_bin.sum()))
+    img = DeepImage(values=vals, offsets=offsets, channels=["R", "G", "B", "A"], ids={},
+                    data_window=(0, 0, w - 1, h - 1), display_window=(0, 0, w - 1, h - 1))
+    lit = np.zeros(h * w, bool)
+    lit[img.pixel_index()[lit_bin]] = True
+    want = brute_force(lit.reshape(h, w), radius).reshape(-1)[img.pixel_index()]
+    got = darkness.dark_bins(img, ChannelMap(), radius)
+    assert want.any() and not want.all()
+    assert (brute_force(lit.reshape(h, w), 0) != ~lit.reshape(h, w)).any()   # specks veto some black windows
+    np.testing.assert_array_equal(got, want)
+    assert darkness.dark_bins(img, ChannelMap(), 0) is None
+
+
+def test_a_black_pixel_among_lit_ones_is_not_dark():
+    img = read_deep(SHOT / "noisy_spp16.0001.exr")
+    m = detect(img)
+    cols = [img.channels.index(c) for c in darkness.colour_channels(m)]
+    lit = np.zeros(img.num_pixels, bool)
+    lit[img.pixel_index()[(img.values[:, cols] != 0).any(1)]] = True
+    lit = lit.reshape(img.height, img.width)
+    y, x = next((y, x) for y in range(1, img.height - 1) for x in range(1, img.width - 1)
+                if lit[y - 1:y + 2, x - 1:x + 2].all())
+    p = y * img.width + x
+    vals = img.values.copy()
+    vals[img.offsets[p]:img.offsets[p + 1], cols] = 0
+    before, after = darkness.dark_bins(img, m, 1), darkness.dark_bins(img.with_values(vals), m, 1)
+    np.testing.assert_array_equal(after, before)
+
+
+def test_the_default_model_keeps_black_neighbourhoods_black_and_changes_nothing_else():
+    model = load_model(None).model
+    img = blackened(read_deep(SHOT / "noisy_spp16.0001.exr"))
+    m = detect(img)
+    on = denoise_window(model, [img], 0).image
+    off = denoise_window(model, [img], 0, dark_radius=0).image
+    dark = darkness.dark_bins(img, m)
+    colour = [img.channels.index(c) for c in darkness.colour_channels(m)]
+    assert (inner(img) & dark).sum() > 0.9 * inner(img).sum() > 500   # specks veto a few near the example's own
+    np.testing.assert_array_equal(on.values[np.ix_(dark, colour)], 0)
+    leak = np.abs(off.values[np.ix_(dark, colour)]).max()
+    assert leak > 1e-4 * np.abs(off.values[:, colour]).max()     # what the rule stops: light from the lit ring
+    np.testing.assert_array_equal(on.values[~dark], off.values[~dark])
+    others = [i for i in range(len(img.channels)) if i not in colour]
+    np.testing.assert_array_equal(on.values[:, others], off.values[:, others])   # alpha, depth: denoised as ever
+    ring = inner(img, 0) & ~inner(img)
+    assert np.abs(on.values[np.ix_(ring, colour)]).max() > 0      # black pixels next to lit ones are filled in
+
+
+@pytest.mark.parametrize("radius", [1, 0])
+def test_light_groups_through_the_cache_keep_the_primary_pass_radius(tmp_path, radius):
+    """`ranad denoise --cache` then `ranad aov` on a frame with a black region and exact light groups: the groups
+    sum to the denoised beauty with the rule on and off, so `ranad aov` applied the radius the cache recorded."""
+    img = blackened(exact_groups(read_deep(SHOT / "noisy_spp16.0001.exr")))
+    write_deep(tmp_path / "b.exr", img)
+    run = lambda *a: CliRunner().invoke(cli, [str(x) for x in a])  # noqa: E731
+    r = run("denoise", tmp_path / "b.exr", "-o", tmp_path / "d.exr", "--cache", tmp_path / "cache",
+            "--dark-radius", radius)
+    assert r.exit_code == 0, r.output
+    r = run("aov", tmp_path / "cache", "--layers", "lg_*", "-o", tmp_path / "a.exr")
+    assert r.exit_code == 0, r.output
+    lg, _ = sums(read_deep(tmp_path / "a.exr"))
+    _, rgb = sums(read_deep(tmp_path / "d.exr"))
+    assert np.abs(lg - rgb).max() < 1e-5 * np.abs(rgb).max()
+    dark = darkness.dark_bins(img, detect(img))
+    assert (np.abs(rgb[dark]).max() == 0) == (radius > 0)
+
+
+def test_a_cache_with_a_damaged_radius_is_refused(tmp_path):
+    from safetensors.numpy import load_file, save_file
+    from safetensors import safe_open
+
+    write_deep(tmp_path / "b.exr", blackened(read_deep(SHOT / "noisy_spp16.0001.exr")))
+    run = lambda *a: CliRunner().invoke(cli, [str(x) for x in a])  # noqa: E731
+    assert run("denoise", tmp_path / "b.exr", "-o", tmp_path / "d.exr", "--cache", tmp_path / "c").exit_code == 0
+    path = next((tmp_path / "c").iterdir())
+    with safe_open(str(path), framework="np") as f:
+        meta = dict(f.metadata())
+    assert meta["dark_radius"] == str(darkness.DARK_RADIUS)
+    save_file(load_file(str(path)), str(path), metadata={**meta, "dark_radius": "-3"})
+    r = run("aov", tmp_path / "c", "--layers", "lg_*", "-o", tmp_path / "a.exr")
+    assert r.exit_code == 2 and "dark_radius" in r.output and path.name in r.output, r.output
+    assert not (tmp_path / "a.exr").exists()
