@@ -1,0 +1,64 @@
+"""Which black neighbourhoods to keep black: the default model's flat HDR-FLIP per family and spp, with no rule and
+with rule variants applied to its output (pixel masks on the flattened image, which is what ranad_core.darkness
+does per bin: every bin of a kept pixel keeps its noisy colour, 0).
+
+Variants: `off`; `rR`: the pixel's (2R+1)^2 window exactly black; `KkSs`: r1 and no speck within s pixels, a speck
+being a lit pixel with at least k of its 8 neighbours black (the default: K7S3).
+usage: python runs/dark-s16/variants.py SET KIND [VARIANT,...]   (SET: a `ranad synth` folder; KIND: deepz, deepoid)
+"""
+import json
+import sys
+from pathlib import Path
+
+import flip_evaluator
+import numpy as np
+
+from ranad_core import metrics
+from ranad_core.denoise import denoise_window
+from ranad_core.exr import read_deep
+from ranad_core.model.store import load_model
+
+root, kind = Path(sys.argv[1]), sys.argv[2]
+names = sys.argv[3].split(",") if len(sys.argv) > 3 else ["off", "r1", "r2", "K7S2", "K7S3", "K7S4", "K8S3"]
+model = load_model(None).model
+
+
+def flip(ref, test):
+    ref32, test32 = (np.ascontiguousarray(np.maximum(x, 0), np.float32) for x in (ref, test))
+    return float(flip_evaluator.evaluate(ref32, test32, "HDR", applyMagma=False)[1])
+
+
+def box_count(a, r):
+    """True pixels in each pixel's (2r+1)^2 window, outside the image counting as False."""
+    h, w = a.shape
+    p = np.pad(a.astype(np.int32), r)
+    return sum(p[dy:dy + h, dx:dx + w] for dy in range(2 * r + 1) for dx in range(2 * r + 1))
+
+
+def mask(name, lit):
+    if name == "off":
+        return np.zeros_like(lit)
+    if name.startswith("r"):
+        return box_count(lit, int(name[1:])) == 0
+    k, s = (int(x) for x in name[1:].split("S"))
+    speck = lit & (box_count(~lit, 1) - ~lit >= k)
+    return (box_count(lit, 1) == 0) & (box_count(speck, s) == 0)
+
+
+res = {}
+for scene in sorted(root.glob("scene_*")):
+    fam = json.loads((scene / "manifest.json").read_text())["preset"]
+    for spp in (4, 16, 64):
+        noisy = read_deep(scene / f"{kind}/noisy_spp{spp}.0000.exr")
+        ref = metrics.flat_rgb(read_deep(scene / f"{kind}/reference_spp{spp}.0000.exr"))
+        nf = metrics.flat_rgb(noisy)
+        out = metrics.flat_rgb(denoise_window(model, [noisy], 0, dark_radius=0).image)
+        lit = (nf != 0).any(-1)
+        r = {"noisy": flip(ref, nf)}
+        r.update({n: flip(ref, np.where(mask(n, lit)[..., None], 0, out)) for n in names})
+        res.setdefault((fam, spp), []).append(r)
+print("| family | spp | scenes | " + " | ".join(res[next(iter(res))][0]) + " |")
+print("|---|---|---|" + "---|" * len(res[next(iter(res))][0]))
+for (fam, spp), rows in sorted(res.items()):
+    print(f"| {fam} | {spp} | {len(rows)} | " + " | ".join(f"{np.mean([x[m] for x in rows]):.4f}" for m in rows[0])
+          + " |")
