@@ -71,10 +71,11 @@ def parse_bytes(text: str) -> float:
                    "whole surfaces: renderers that merge less than 3% get the quality of ones that do. Output "
                    "keeps every input bin; 0 turns it off.")
 @click.option("--dark-radius", "dark_radius", type=click.IntRange(0, 8), default=DARK_RADIUS, show_default=True,
-              help="A pixel whose noisy colour is exactly black, as is every pixel within this many pixels of it, "
-                   "stays exactly black (beauty and AOVs; alpha and depth are denoised): a black neighbourhood "
-                   "means no light, and the kernels would spread a faint glow of lit neighbours into it. A "
-                   "black pixel among lit ones is still filled in. 0 turns it off.")
+              help="Every pixel of an exactly black window of (2R+1)x(2R+1) pixels stays exactly black (beauty and "
+                   "AOVs; alpha and depth are denoised): a black neighbourhood means no light, and the kernels "
+                   "would spread a faint glow of lit neighbours into it. A black pixel among lit ones is still "
+                   "filled in, and so are windows near isolated lit pixels (a dim region few samples reach). 0 "
+                   "turns it off.")
 @click.option("--tile", type=click.IntRange(16), default=None,
               help="Tile size in pixels (default: the tiling that fits --max-memory with the fewest bins "
                    "computed twice in the halos; on the CPU, windows of at most 0.8 M bins).")
@@ -115,7 +116,8 @@ def parse_bytes(text: str) -> float:
                    "write) and a per-tile summary (bins with the halo, halo overlap, seconds per tile).")
 def denoise_cmd(inputs, output, frames, model, device, threads, kind, maps, preset, motion_units, fps, shutter,
                 motion_y, keep_noisy, keep_depth, bin_merge, dark_radius, tile, halo, max_memory, cache_dir,
-                skip_existing, shard, strict, window, aovs, reference, parts, flow, flow_direction, flow_channels, profile):
+                skip_existing, shard, strict, window, aovs, reference, parts, flow, flow_direction, flow_channels,
+                profile):
     """Denoise deep EXR INPUTS (files or patterns such as beauty.####.exr) into deep EXRs with the same pixels,
     bins, bin order, channels, ids and header: diffuse, specular, alpha and depth are denoised and the beauty
     is rebuilt from them.

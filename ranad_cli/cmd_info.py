@@ -58,8 +58,9 @@ def _print_text(d: dict) -> None:
                        "the bin in front (same ids): ranad denoise merges them (--bin-merge)")
         if p.get("dark_pixels"):
             share = 100 * p["dark_pixels"] / max(w * h, 1)
-            click.echo(f"    black neighbourhoods: {p['dark_pixels']} pixels ({share:.1f}%) are exactly black, as are "
-                       f"their neighbours within {DARK_RADIUS}: ranad denoise keeps them black (--dark-radius)")
+            side = 2 * DARK_RADIUS + 1
+            click.echo(f"    black neighbourhoods: {p['dark_pixels']} pixels ({share:.1f}%) lie in exactly black "
+                       f"{side}x{side} windows: ranad denoise keeps them black (--dark-radius)")
         if p["nonfinite_values"]:
             click.echo(f"    WARNING: {p['nonfinite_values']} NaN/Inf sample values")
 

@@ -7,14 +7,15 @@ the frame's exposure but a glow many stops up, which is where HDR-FLIP and a com
 held-out glass family it made the default's flat FLIP worse than the noisy input's: runs/dark-s16).
 
 One exactly black pixel is no evidence (a dark dot of a dim, noisy region: the denoiser must fill it in), a
-black neighbourhood is, unless the region is sampled so sparsely that black windows come by chance: a pixel stays
-black when it and every pixel within `radius` (a square window) are exactly black in every colour channel the
-primary pass writes, and no "speck" lies within SPECK_REACH pixels: a lit pixel with at least SPECK_BLACK of its 8
-neighbours black, the mark of a dim region where few samples find light (at 4 spp the plain 3x3 rule darkened
-such regions by up to 9% FLIP; with the speck test by up to 2%: runs/dark-s16). Those bins keep their noisy
-colour (0) in the beauty and in every light group denoised through the cached kernels (their kernel becomes the
-identity, so the output stays linear in the noisy values and light groups still sum to the beauty); their alpha
-and depth are denoised as any other bin's. Windows are clipped to the data window.
+black neighbourhood is, unless the region is sampled so sparsely that black windows come by chance. Every pixel of
+a (2 radius + 1)^2 window exactly black in every colour channel the primary pass writes stays black, unless a
+"speck" lies within SPECK_REACH pixels of it or of the window's centre: a lit pixel with at least SPECK_BLACK of
+its 8 neighbours black, the mark of a dim region where few samples find light. (Windows' centres alone left the
+black pixels next to lit ones glowing; without the speck test, 3x3 windows darkened dim regions at 4 spp by up
+to 9% FLIP, with it by up to 3%: runs/dark-s16.) Those bins keep their noisy colour (0) in the beauty and in every
+light group denoised through the cached kernels (their kernel becomes the identity, so the output stays linear in
+the noisy values and light groups still sum to the beauty); their alpha and depth are denoised as any other
+bin's. Windows are clipped to the data window.
 """
 
 from __future__ import annotations
@@ -64,6 +65,8 @@ def dark_bins(img: DeepImage, m: ChannelMap, radius: int = DARK_RADIUS) -> np.nd
     lit = lit.reshape(img.height, img.width)
     black_neighbours = _box_sum(~lit, 1) - ~lit
     speck = lit & (black_neighbours >= SPECK_BLACK)
-    keep = (_box_sum(lit, radius) == 0) & (_box_sum(speck, SPECK_REACH) == 0)
+    calm = _box_sum(speck, SPECK_REACH) == 0
+    centre = (_box_sum(lit, radius) == 0) & calm   # centres of black windows
+    keep = (_box_sum(centre, radius) > 0) & calm     # every pixel of their windows
     dark = keep.reshape(-1)[img.pixel_index()]
     return dark if dark.any() else None

@@ -3,7 +3,10 @@ with rule variants applied to its output (pixel masks on the flattened image, wh
 does per bin: every bin of a kept pixel keeps its noisy colour, 0).
 
 Variants: `off`; `rR`: the pixel's (2R+1)^2 window exactly black; `KkSs`: r1 and no speck within s pixels, a speck
-being a lit pixel with at least k of its 8 neighbours black (the default: K7S3).
+being a lit pixel with at least k of its 8 neighbours black; `KkSswW`: the same with a (2W+1)^2 window (w0: the
+pixel alone); `KkSsgG`: KkSs grown G times by one pixel into black pixels with no speck within s (gf: until it
+stops growing). The shipped rule is K7S3g1: every pixel of a black 3x3 window whose centre, and itself, have no
+speck within 3 px.
 usage: python runs/dark-s16/variants.py SET KIND [VARIANT,...]   (SET: a `ranad synth` folder; KIND: deepz, deepoid)
 """
 import json
@@ -19,7 +22,8 @@ from ranad_core.exr import read_deep
 from ranad_core.model.store import load_model
 
 root, kind = Path(sys.argv[1]), sys.argv[2]
-names = sys.argv[3].split(",") if len(sys.argv) > 3 else ["off", "r1", "r2", "K7S2", "K7S3", "K7S4", "K8S3"]
+names = sys.argv[3].split(",") if len(sys.argv) > 3 else ["off", "r1", "r2", "K7S2", "K7S3", "K7S4", "K8S3", "K7S3w0",
+                                                           "K7S3g1", "K7S3g2", "K7S3gf"]
 model = load_model(None).model
 
 
@@ -40,9 +44,20 @@ def mask(name, lit):
         return np.zeros_like(lit)
     if name.startswith("r"):
         return box_count(lit, int(name[1:])) == 0
-    k, s = (int(x) for x in name[1:].split("S"))
+    grow = None
+    if "g" in name:
+        name, grow = name.split("g")
+    w = int(name.split("w")[1]) if "w" in name else 1
+    k, s = (int(x) for x in name.split("w")[0][1:].split("S"))
     speck = lit & (box_count(~lit, 1) - ~lit >= k)
-    return (box_count(lit, 1) == 0) & (box_count(speck, s) == 0)
+    calm = box_count(speck, s) == 0
+    m = (box_count(lit, w) == 0) & calm
+    for _ in range(10 ** 6 if grow == "f" else int(grow or 0)):
+        grown = ~lit & calm & (box_count(m, 1) > 0)
+        if (grown == m).all():
+            break
+        m = grown
+    return m
 
 
 res = {}
