@@ -28,17 +28,30 @@ from .deep import DeepImage
 DARK_RADIUS = 1    # 3x3 windows: wider ones keep less of the leak out, a single pixel keeps dark dots
 SPECK_BLACK = 7    # a lit pixel with this many black neighbours (of 8) marks a sparsely sampled region
 SPECK_REACH = 3    # no black window within this many pixels of a speck is trusted
+LIT_BLOCK = 16384  # rows per block when finding lit bins
 
 
 def _box_sum(mask: np.ndarray, radius: int) -> np.ndarray:
-    """int32 [H, W]: how many True pixels lie in each pixel's (2 radius + 1)^2 window, clipped to the image."""
-    out = mask.astype(np.int32)
-    for axis in (0, 1):
-        c = np.cumsum(np.pad(out, [(1, 0) if a == axis else (0, 0) for a in (0, 1)]), axis=axis)
-        n = out.shape[axis]
-        hi = np.minimum(np.arange(n) + radius + 1, n)
-        lo = np.maximum(np.arange(n) - radius, 0)
-        out = np.take(c, hi, axis=axis) - np.take(c, lo, axis=axis)
+    """int16 [H, W]: how many True pixels lie in each pixel's (2 radius + 1)^2 window, clipped to the image
+    (shifted adds, rows then columns: a few ms at 1080p; int16 holds the counts of windows up to radius 90)."""
+    one = mask.astype(np.int16)
+    rows = one.copy()
+    for d in range(1, radius + 1):
+        rows[d:] += one[:-d]
+        rows[:-d] += one[d:]
+    out = rows.copy()
+    for d in range(1, radius + 1):
+        out[:, d:] += rows[:, :-d]
+        out[:, :-d] += rows[:, d:]
+    return out
+
+
+def _lit_bins(values: np.ndarray, cols: list) -> np.ndarray:
+    """bool [N]: bins with a non-zero value in one of the columns, read in blocks of rows that stay in cache (a
+    column gather over the whole [N, C] array cost 0.3 s at 1080p, the blocks 0.06 s)."""
+    out = np.empty(len(values), bool)
+    for i in range(0, len(values), LIT_BLOCK):
+        out[i:i + LIT_BLOCK] = (values[i:i + LIT_BLOCK][:, cols] != 0).any(1)
     return out
 
 
@@ -59,14 +72,15 @@ def dark_bins(img: DeepImage, m: ChannelMap, radius: int = DARK_RADIUS) -> np.nd
     if radius <= 0 or img.num_bins == 0:
         return None
     cols = [img.channel_index(c) for c in colour_channels(m)]
-    lit_bin = (img.values[:, cols] != 0).any(1)
+    lit_bin = _lit_bins(img.values, cols)
+    pixel = img.pixel_index()
     lit = np.zeros(img.num_pixels, bool)
-    lit[img.pixel_index()[lit_bin]] = True
+    lit[pixel[lit_bin]] = True
     lit = lit.reshape(img.height, img.width)
     black_neighbours = _box_sum(~lit, 1) - ~lit
     speck = lit & (black_neighbours >= SPECK_BLACK)
     calm = _box_sum(speck, SPECK_REACH) == 0
     centre = (_box_sum(lit, radius) == 0) & calm   # centres of black windows
     keep = (_box_sum(centre, radius) > 0) & calm     # every pixel of their windows
-    dark = keep.reshape(-1)[img.pixel_index()]
+    dark = keep.reshape(-1)[pixel]
     return dark if dark.any() else None
