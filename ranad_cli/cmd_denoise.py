@@ -74,8 +74,9 @@ def parse_bytes(text: str) -> float:
               help="Every pixel of an exactly black window of (2R+1)x(2R+1) pixels stays exactly black (beauty and "
                    "AOVs; alpha and depth are denoised): a black neighbourhood means no light, and the kernels "
                    "would spread a faint glow of lit neighbours into it. A black pixel among lit ones is still "
-                   "filled in, and so are windows near isolated lit pixels (a dim region few samples reach). 0 "
-                   "turns it off.")
+                   "filled in, and so are windows near isolated lit pixels (a dim region few samples reach). "
+                   "Objects (id channel) with no lit bin, such as holdout mattes, stay black too. 0 turns it "
+                   "off.")
 @click.option("--tile", type=click.IntRange(16), default=None,
               help="Tile size in pixels (default: the tiling that fits --max-memory with the fewest bins "
                    "computed twice in the halos; on the CPU, windows of at most 0.8 M bins).")

@@ -16,6 +16,12 @@ to 9% FLIP, with it by up to 3%: runs/dark-s16.) Those bins keep their noisy col
 light group denoised through the cached kernels (their kernel becomes the identity, so the output stays linear in
 the noisy values and light groups still sum to the beauty); their alpha and depth are denoised as any other
 bin's. Windows are clipped to the data window.
+
+Objects work the same way where the file has an object id channel: an object none of whose bins in the frame is
+lit (at least HOLDOUT_MIN_BINS of them) stays black in every bin, wherever it is. That is a holdout matte (deep
+holdouts are written with alpha and no colour, so that a composite cuts the object out) or an object no light
+reaches; the kernels gave the bins of a holdout in the bundled example up to 2x a lit bin's median colour, which a
+composite shows as light where the holdout should cut (tests/test_darkness.py).
 """
 
 from __future__ import annotations
@@ -29,6 +35,7 @@ DARK_RADIUS = 1    # 3x3 windows: wider ones keep less of the leak out, a single
 SPECK_BLACK = 7    # a lit pixel with this many black neighbours (of 8) marks a sparsely sampled region
 SPECK_REACH = 3    # no black window within this many pixels of a speck is trusted
 LIT_BLOCK = 16384  # rows per block when finding lit bins
+HOLDOUT_MIN_BINS = 16   # fewer all-black bins of one object may be a small dim one that no sample reached by chance
 
 
 def _box_sum(mask: np.ndarray, radius: int) -> np.ndarray:
@@ -66,9 +73,24 @@ def colour_channels(m: ChannelMap) -> list:
     return names
 
 
+def holdout_bins(img: DeepImage, lit_bin: np.ndarray) -> np.ndarray | None:
+    """bool [N]: the bins of objects (the object id channel) with at least HOLDOUT_MIN_BINS bins and none lit, or
+    None (no id channel, no such object)."""
+    from .exr.inspect import object_id_channel
+
+    name = object_id_channel(img)
+    if name is None:
+        return None
+    ids = img.ids[name]
+    black_ids, counts = np.unique(ids[~lit_bin], return_counts=True)
+    hold = black_ids[(counts >= HOLDOUT_MIN_BINS) & ~np.isin(black_ids, np.unique(ids[lit_bin]))]
+    return np.isin(ids, hold) if hold.size else None
+
+
 def dark_bins(img: DeepImage, m: ChannelMap, radius: int = DARK_RADIUS) -> np.ndarray | None:
-    """bool [N] in the file's bin order: the bins of pixels that stay black (see the module's docstring), or None
-    when radius is 0 or no pixel qualifies. `img`: the noisy frame after the NaN/Inf policy."""
+    """bool [N] in the file's bin order: the bins that stay black (black windows and holdout objects, see the
+    module's docstring), or None when radius is 0 or no bin qualifies. `img`: the noisy frame after the NaN/Inf
+    policy."""
     if radius <= 0 or img.num_bins == 0:
         return None
     cols = [img.channel_index(c) for c in colour_channels(m)]
@@ -83,4 +105,7 @@ def dark_bins(img: DeepImage, m: ChannelMap, radius: int = DARK_RADIUS) -> np.nd
     centre = (_box_sum(lit, radius) == 0) & calm   # centres of black windows
     keep = (_box_sum(centre, radius) > 0) & calm     # every pixel of their windows
     dark = keep.reshape(-1)[pixel]
+    held = holdout_bins(img, lit_bin)
+    if held is not None:
+        dark |= held
     return dark if dark.any() else None

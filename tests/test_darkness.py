@@ -164,4 +164,44 @@ def test_info_counts_the_pixels_kept_black(tmp_path):
     assert r.exit_code == 0, r.output
     assert json.loads(r.output)[0]["parts"][0]["dark_pixels"] == want > 300
     r = CliRunner().invoke(cli, ["info", str(tmp_path / "b.exr")])
-    assert f"black neighbourhoods: {want} pixels" in r.output
+    assert f"kept black: {want} pixels" in r.output
+
+
+def held_out(img: DeepImage, obj: int) -> DeepImage:
+    """img with every radiance channel of object `obj`'s bins set to 0, alpha kept: a deep holdout matte."""
+    sel = img.ids["id"] == obj
+    vals = img.values.copy()
+    for i, c in enumerate(img.channels):
+        if c in RADIANCE[:3] or c.startswith(RADIANCE[3:]):
+            vals[sel, i] = 0
+    return img.with_values(vals)
+
+
+def test_a_holdout_object_stays_black_and_a_dim_one_does_not():
+    model = load_model(None).model
+    src = read_deep(SHOT / "noisy_spp16.0001.exr")
+    img = held_out(src, 5)
+    m = detect(img)
+    rgb = [img.channels.index(c) for c in "RGB"]
+    sel = img.ids["id"] == 5
+    assert sel.sum() >= darkness.HOLDOUT_MIN_BINS
+    on = denoise_window(model, [img], 0).image
+    off = denoise_window(model, [img], 0, dark_radius=0).image
+    np.testing.assert_array_equal(on.values[np.ix_(sel, rgb)], 0)
+    # without the rule the kernels light the holdout: on average above the median lit bin's colour
+    assert np.abs(off.values[np.ix_(sel, rgb)]).mean() > np.median(np.abs(off.values[np.ix_(~sel, rgb)]))
+    dark = darkness.dark_bins(img, m)
+    np.testing.assert_array_equal(on.values[~dark], off.values[~dark])
+    # one lit bin makes it an object like any other, and so do too few bins
+    p = int(np.flatnonzero(sel)[0])
+    vals = img.values.copy()
+    vals[p, rgb] = src.values[p, rgb] + 1e-3
+    again = darkness.dark_bins(img.with_values(vals), m)
+    assert not again[np.flatnonzero(sel)[1:]].all()
+    cols = [img.channels.index(c) for c in darkness.colour_channels(m)]
+    small = held_out(src, 4)
+    four = small.ids["id"] == 4
+    assert four.sum() == darkness.HOLDOUT_MIN_BINS
+    assert darkness.holdout_bins(small, darkness._lit_bins(small.values, cols))[four].all()
+    fewer = small.keep(~four | (np.cumsum(four) > 1))     # one of its bins gone: too few to call it a holdout
+    assert darkness.holdout_bins(fewer, darkness._lit_bins(fewer.values, cols)) is None

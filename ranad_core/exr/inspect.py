@@ -55,8 +55,8 @@ def thin_bins(image: DeepImage) -> int:
 
 
 def dark_pixels(image: DeepImage) -> int:
-    """Pixels `ranad denoise` keeps exactly black at the default radius (darkness: they and their neighbours are
-    exactly black); 0 for files it could not read."""
+    """Pixels holding bins `ranad denoise` keeps exactly black at the default radius (darkness: exactly black
+    windows, holdout objects); 0 for files it could not read."""
     from ..channels import detect
     from ..darkness import dark_bins
     from ..errors import RanadError
