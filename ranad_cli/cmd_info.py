@@ -59,8 +59,9 @@ def _print_text(d: dict) -> None:
         if p.get("dark_pixels"):
             share = 100 * p["dark_pixels"] / max(w * h, 1)
             side = 2 * DARK_RADIUS + 1
-            click.echo(f"    kept black: {p['dark_pixels']} pixels ({share:.1f}%) hold bins of exactly black {side}x{side} "
-                       "windows or of holdout objects (no bin lit): ranad denoise keeps their colour 0 (--dark-radius)")
+            click.echo(f"    kept black: {p['dark_pixels']} pixels ({share:.1f}%) hold bins of exactly black "
+                       f"{side}x{side} windows or of holdout objects (no bin lit): ranad denoise keeps their colour 0 "
+                       "(--dark-radius)")
         if p["nonfinite_values"]:
             click.echo(f"    WARNING: {p['nonfinite_values']} NaN/Inf sample values")
 

@@ -52,7 +52,7 @@ class FrameResult:
     merges: list | None = None           # per window frame: binmerge group of each sorted bin, or None (no merge)
     split: np.ndarray | None = None      # the centre's binmerge.split_factors (None: nothing merged)
     merge_gap: float = 0.0               # the binmerge gap the frames were merged with
-    dark_radius: int = 0                 # darkness: exactly black neighbourhoods of this radius kept black (0: off)
+    dark_radius: int = 0                 # darkness: black windows of this radius and holdouts kept black (0: off)
 
     @property
     def perm(self):
@@ -306,8 +306,8 @@ def denoise_window(model, images: list, centre: int, mapping: ChannelMap | None 
     keeps across the windows of a shot (shot.py) and this fills in where None. `keep_depth`: the depth layer is
     not reconstructed and the file's depths are written as they are. `merge_gap`: thin bins of one surface within
     this relative depth gap are denoised as one and shared back (binmerge; None: its default, 0: off).
-    `dark_radius`: pixels exactly black, as is every pixel within this radius, keep their black colour (darkness;
-    None: its default, 0: off).
+    `dark_radius`: the radius of darkness' black windows: bins of exactly black windows and of holdout objects keep
+    their colour, 0 (None: its default, 0: off).
 
     Tiles run where the model is (`model.to("cuda")`: `ranad denoise --device cuda`), and so does the flat prior's
     OIDN; inputs are prepared and outputs assembled on the CPU."""

@@ -37,6 +37,16 @@ def blackened(img: DeepImage) -> DeepImage:
     return img.with_values(vals)
 
 
+def held_out(img: DeepImage, obj: int) -> DeepImage:
+    """img with every radiance channel of object `obj`'s bins set to 0, alpha kept: a deep holdout matte."""
+    sel = img.ids["id"] == obj
+    vals = img.values.copy()
+    for i, c in enumerate(img.channels):
+        if c in RADIANCE[:3] or c.startswith(RADIANCE[3:]):
+            vals[sel, i] = 0
+    return img.with_values(vals)
+
+
 def inner(img: DeepImage, margin: int = 1) -> np.ndarray:
     y, x = np.divmod(img.pixel_index(), img.width)
     lo, hi = BOX[0] + margin, BOX[1] - margin
@@ -121,8 +131,9 @@ def test_the_default_model_keeps_black_neighbourhoods_black_and_changes_nothing_
 @pytest.mark.parametrize("radius", [1, 0])
 def test_light_groups_through_the_cache_keep_the_primary_pass_radius(tmp_path, radius):
     """`ranad denoise --cache` then `ranad aov` on a frame with a black region and exact light groups: the groups
-    sum to the denoised beauty with the rule on and off, so `ranad aov` applied the radius the cache recorded."""
-    img = blackened(exact_groups(read_deep(SHOT / "noisy_spp16.0001.exr")))
+    sum to the denoised beauty with the rule on and off, so `ranad aov` applied the radius the cache recorded; with
+    a holdout object too."""
+    img = held_out(blackened(exact_groups(read_deep(SHOT / "noisy_spp16.0001.exr"))), 5)   # and a holdout
     write_deep(tmp_path / "b.exr", img)
     run = lambda *a: CliRunner().invoke(cli, [str(x) for x in a])  # noqa: E731
     r = run("denoise", tmp_path / "b.exr", "-o", tmp_path / "d.exr", "--cache", tmp_path / "cache",
@@ -135,6 +146,7 @@ def test_light_groups_through_the_cache_keep_the_primary_pass_radius(tmp_path, r
     assert np.abs(lg - rgb).max() < 1e-5 * np.abs(rgb).max()
     dark = darkness.dark_bins(img, detect(img))
     assert (np.abs(rgb[dark]).max() == 0) == (radius > 0)
+    assert dark[img.ids["id"] == 5].all()
 
 
 def test_a_cache_with_a_damaged_radius_is_refused(tmp_path):
@@ -165,16 +177,6 @@ def test_info_counts_the_pixels_kept_black(tmp_path):
     assert json.loads(r.output)[0]["parts"][0]["dark_pixels"] == want > 300
     r = CliRunner().invoke(cli, ["info", str(tmp_path / "b.exr")])
     assert f"kept black: {want} pixels" in r.output
-
-
-def held_out(img: DeepImage, obj: int) -> DeepImage:
-    """img with every radiance channel of object `obj`'s bins set to 0, alpha kept: a deep holdout matte."""
-    sel = img.ids["id"] == obj
-    vals = img.values.copy()
-    for i, c in enumerate(img.channels):
-        if c in RADIANCE[:3] or c.startswith(RADIANCE[3:]):
-            vals[sel, i] = 0
-    return img.with_values(vals)
 
 
 def test_a_holdout_object_stays_black_and_a_dim_one_does_not():
