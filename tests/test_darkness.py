@@ -207,3 +207,20 @@ def test_a_holdout_object_stays_black_and_a_dim_one_does_not():
     assert darkness.holdout_bins(small, darkness._lit_bins(small.values, cols))[four].all()
     fewer = small.keep(~four | (np.cumsum(four) > 1))     # one of its bins gone: too few to call it a holdout
     assert darkness.holdout_bins(fewer, darkness._lit_bins(fewer.values, cols)) is None
+
+
+def test_light_groups_in_one_step_through_a_shot(tmp_path):
+    """`ranad denoise SHOT --aovs` (the sequence default, every frame with its neighbours): bins kept black are
+    black in the beauty and in every group, and the groups sum to the denoised beauty."""
+    for f in range(3):
+        frame = held_out(blackened(exact_groups(read_deep(SHOT / f"noisy_spp16.{f:04d}.exr"))), 5)
+        write_deep(tmp_path / f"b.{f:04d}.exr", frame)
+    r = CliRunner().invoke(cli, ["denoise", str(tmp_path / "b.####.exr"), "-o", str(tmp_path / "d" / "b.####.exr"),
+                                 "--aovs", "lg_*"])
+    assert r.exit_code == 0, r.output
+    for f in range(3):
+        src, out = read_deep(tmp_path / f"b.{f:04d}.exr"), read_deep(tmp_path / "d" / f"b.{f:04d}.exr")
+        lg, rgb = sums(out)
+        assert np.abs(lg - rgb).max() < 1e-5 * np.abs(rgb).max()
+        dark = darkness.dark_bins(src, detect(src))
+        assert dark[src.ids["id"] == 5].all() and np.abs(lg[dark]).max() == 0 == np.abs(rgb[dark]).max()
