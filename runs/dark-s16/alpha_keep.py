@@ -1,35 +1,42 @@
-"""A negative result (runs/dark-s16/README.md, section 4): keep alpha at exactly 1 for the front bin of pixels whose front bins in the 3x3 window all have
-noisy alpha exactly 1. usage: python runs/dark-s16/alpha_keep.py SET"""
-import sys, numpy as np
+"""A negative result (runs/dark-s16/README.md, section 4): the default's output with the front bin's alpha set
+back to exactly 1 where the noisy front bins of the pixel's whole 3x3 window are exactly opaque, scored by
+`ranad eval`'s compositing edit (deep-Z, the held-out families glass and layers).
+usage: python runs/dark-s16/alpha_keep.py SET"""
+import collections
+import sys
+
+import numpy as np
+
 import ranad_core.evaluate as ev
 from ranad_core.model.store import load_model
-orig = ev.denoise_window
-def patched(model, images, centre, **kw):
-    res = orig(model, images, centre, **kw)
-    img = images[centre]; out = res.image
-    a = img.channel("A"); first = img.offsets[:-1]; cnt = img.counts
+
+plain = ev.denoise_window
+
+
+def opaque_kept(model, images, centre, **kw):
+    res = plain(model, images, centre, **kw)
+    img, out = images[centre], res.image
+    first, has = img.offsets[:-1], img.counts > 0
     h, w = img.height, img.width
-    front1 = np.zeros(h * w, bool)
-    has = cnt > 0
-    front1[has] = a[first[has]] >= 1.0
-    f = front1.reshape(h, w)
-    p = np.pad(f, 1, constant_values=True)
-    allw = np.ones_like(f)
+    front = np.zeros(h * w, bool)
+    front[has] = img.channel("A")[first[has]] >= 1.0
+    padded = np.pad(front.reshape(h, w), 1, constant_values=True)
+    window = np.ones((h, w), bool)
     for dy in range(3):
         for dx in range(3):
-            allw &= p[dy:dy + h, dx:dx + w]
-    keep_px = np.flatnonzero(allw.reshape(-1) & has)
+            window &= padded[dy:dy + h, dx:dx + w]
+    keep = np.flatnonzero(window.reshape(-1) & has)
     vals = out.values.copy()
-    vals[first[keep_px], out.channels.index("A")] = 1.0
+    vals[first[keep], out.channels.index("A")] = 1.0
     res.image = out.with_values(vals)
     return res
-ev.denoise_window = patched
-model = load_model(None).model
-r = ev.evaluate(sys.argv[1], model, None, ["deepz"], None, 0, None, (0,), ("glass", "layers"))
-import collections
-d = collections.defaultdict(list)
-for row in r.rows:
-    d[(row["method"], row["spp"])].append(row["comp_flip"])
-for k in sorted(d):
-    if k[0] in ("ranad", "recolour"):
-        print(k, np.nanmean(d[k]))
+
+
+ev.denoise_window = opaque_kept
+result = ev.evaluate(sys.argv[1], load_model(None).model, None, ["deepz"], None, 0, None, (0,), ("glass", "layers"))
+edit = collections.defaultdict(list)
+for row in result.rows:
+    edit[(row["method"], row["spp"])].append(row["comp_flip"])
+for (method, spp), v in sorted(edit.items()):
+    if method in ("ranad", "recolour"):
+        print(f"{method} {spp} spp: edit FLIP {np.nanmean(v):.4f}")
