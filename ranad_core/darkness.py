@@ -20,8 +20,8 @@ bin's. Windows are clipped to the data window.
 Objects work the same way where the file has an object id channel: an object none of whose bins in the frame is
 lit (at least HOLDOUT_MIN_BINS of them) stays black in every bin, wherever it is. That is a holdout matte (deep
 holdouts are written with alpha and no colour, so that a composite cuts the object out) or an object no light
-reaches; the kernels gave the bins of a holdout in the bundled example up to 2x a lit bin's median colour, which a
-composite shows as light where the holdout should cut (tests/test_darkness.py).
+reaches; the kernels gave the bins of one object of the bundled example, held out, more colour on average than the
+median lit bin has, which a composite shows as light where the holdout should cut (tests/test_darkness.py).
 """
 
 from __future__ import annotations
