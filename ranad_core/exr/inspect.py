@@ -42,33 +42,34 @@ def guess_kind(image: DeepImage) -> str:
     return "deep-Z" if repeated else "deep-OID"
 
 
-def thin_bins(image: DeepImage) -> int:
+def thin_bins(image: DeepImage, mapping) -> int:
     """Bins that `ranad denoise` merges into the bin in front of them at the default gap (binmerge): thin bins of
-    one surface, as renderers that merge a pixel's samples less than ranad's training data write."""
+    one surface, as renderers that merge a pixel's samples less than ranad's training data write. Found as
+    denoise finds them: on the canonical channels of `mapping`, after the NaN/Inf policy."""
     from ..binmerge import groups_of
+    from ..channels import DEPTHS, canonical
+    from ..deep import replace_nonfinite
 
-    if image.num_bins < 2 or "A" not in image.channels or "Z" not in image.channels:
+    if image.num_bins < 2:
         return 0
-    srt, perm = image.sorted()
+    srt, perm = replace_nonfinite(canonical(image, mapping)[0], DEPTHS)[0].sorted()
     groups = groups_of(srt, image, perm)
     return 0 if groups is None else image.num_bins - groups.merged
 
 
-def dark_pixels(image: DeepImage) -> int:
+def dark_pixels(image: DeepImage, mapping) -> int:
     """Pixels holding bins `ranad denoise` keeps exactly black at the default radius (darkness: exactly black
-    windows, holdout objects); 0 for files it could not read."""
-    from ..channels import detect
+    windows, holdout objects), found on the frame as denoise's output step reads it (the NaN/Inf policy
+    applied)."""
     from ..darkness import dark_bins
-    from ..errors import RanadError
+    from ..deep import replace_nonfinite
 
-    try:
-        dark = dark_bins(image, detect(image))
-    except (RanadError, KeyError, ValueError):
-        return 0
+    dark = dark_bins(replace_nonfinite(image, mapping.depth_channels())[0], mapping)
     return 0 if dark is None else int(np.unique(image.pixel_index()[dark]).size)
 
 
-def _deep_stats(image: DeepImage) -> dict[str, Any]:
+def _deep_stats(image: DeepImage, mapping=None) -> dict[str, Any]:
+    """`mapping`: the channels `ranad denoise` would read (None: it could not; no thin-bin or kept-black counts)."""
     counts = image.counts
     covered = counts > 0
     z = image.channel("Z") if "Z" in image.channels else None
@@ -84,8 +85,8 @@ def _deep_stats(image: DeepImage) -> dict[str, Any]:
         "id_channels": list(image.ids),
         "nonfinite_values": nonfinite,
         "measured_state": image.measured_state(),
-        "thin_bins": thin_bins(image),
-        "dark_pixels": dark_pixels(image),
+        "thin_bins": 0 if mapping is None else thin_bins(image, mapping),
+        "dark_pixels": 0 if mapping is None else dark_pixels(image, mapping),
     }
 
 
@@ -127,6 +128,7 @@ def _describe(path: str, layout, src, stats: bool, overrides: dict | None) -> di
             from ..errors import RanadError
 
             names = [c.name for c in part.channels if c.type != "uint"]
+            mapping = None
             try:
                 mapping = detect_names(names, overrides)
                 info["denoise_channels"] = mapping.describe()
@@ -135,7 +137,7 @@ def _describe(path: str, layout, src, stats: bool, overrides: dict | None) -> di
             except RanadError as e:
                 info["denoise_channels"] = {"mode": f"cannot denoise: {e.problem}"}
         if deep and stats:
-            info.update(_deep_stats(read_part(path, layout, src, i)))
+            info.update(_deep_stats(read_part(path, layout, src, i), mapping))
         out["parts"].append(info)
     return out
 
