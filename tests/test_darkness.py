@@ -25,26 +25,24 @@ BOX = (8, 28)   # rows and columns 8..27 of the 48 x 48 frame are made black
 RADIANCE = ("R", "G", "B", "diffuse.", "specular.", "emission.", "lg_")
 
 
-def blackened(img: DeepImage) -> DeepImage:
-    """img with every radiance channel of the pixels in BOX x BOX set to exactly 0 (alpha, depth, guides kept):
-    an object over an empty background, as a renderer writes it."""
-    y, x = np.divmod(img.pixel_index(), img.width)
-    inside = (y >= BOX[0]) & (y < BOX[1]) & (x >= BOX[0]) & (x < BOX[1])
+def without_light(img: DeepImage, bins: np.ndarray) -> DeepImage:
+    """img with every radiance channel of `bins` (bool [N]) set to exactly 0; alpha, depth and guides kept."""
     vals = img.values.copy()
     for i, c in enumerate(img.channels):
         if c in RADIANCE[:3] or c.startswith(RADIANCE[3:]):
-            vals[inside, i] = 0
+            vals[bins, i] = 0
     return img.with_values(vals)
+
+
+def blackened(img: DeepImage) -> DeepImage:
+    """img with the pixels in BOX x BOX without light: an object over an empty background, as a renderer writes
+    it."""
+    return without_light(img, inner(img, 0))
 
 
 def held_out(img: DeepImage, obj: int) -> DeepImage:
-    """img with every radiance channel of object `obj`'s bins set to 0, alpha kept: a deep holdout matte."""
-    sel = img.ids["id"] == obj
-    vals = img.values.copy()
-    for i, c in enumerate(img.channels):
-        if c in RADIANCE[:3] or c.startswith(RADIANCE[3:]):
-            vals[sel, i] = 0
-    return img.with_values(vals)
+    """img with object `obj`'s bins without light, alpha kept: a deep holdout matte."""
+    return without_light(img, img.ids["id"] == obj)
 
 
 def inner(img: DeepImage, margin: int = 1) -> np.ndarray:

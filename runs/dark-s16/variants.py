@@ -17,6 +17,7 @@ import flip_evaluator
 import numpy as np
 
 from ranad_core import metrics
+from ranad_core.darkness import _box_sum   # the rule's own window counts (clipped to the image)
 from ranad_core.denoise import denoise_window
 from ranad_core.exr import read_deep
 from ranad_core.model.store import load_model
@@ -32,28 +33,21 @@ def flip(ref, test):
     return float(flip_evaluator.evaluate(ref32, test32, "HDR", applyMagma=False)[1])
 
 
-def box_count(a, r):
-    """True pixels in each pixel's (2r+1)^2 window, outside the image counting as False."""
-    h, w = a.shape
-    p = np.pad(a.astype(np.int32), r)
-    return sum(p[dy:dy + h, dx:dx + w] for dy in range(2 * r + 1) for dx in range(2 * r + 1))
-
-
 def mask(name, lit):
     if name == "off":
         return np.zeros_like(lit)
     if name.startswith("r"):
-        return box_count(lit, int(name[1:])) == 0
+        return _box_sum(lit, int(name[1:])) == 0
     grow = None
     if "g" in name:
         name, grow = name.split("g")
     w = int(name.split("w")[1]) if "w" in name else 1
     k, s = (int(x) for x in name.split("w")[0][1:].split("S"))
-    speck = lit & (box_count(~lit, 1) - ~lit >= k)
-    calm = box_count(speck, s) == 0
-    m = (box_count(lit, w) == 0) & calm
+    speck = lit & (_box_sum(~lit, 1) - ~lit >= k)
+    calm = _box_sum(speck, s) == 0
+    m = (_box_sum(lit, w) == 0) & calm
     for _ in range(10 ** 6 if grow == "f" else int(grow or 0)):
-        grown = ~lit & calm & (box_count(m, 1) > 0)
+        grown = ~lit & calm & (_box_sum(m, 1) > 0)
         if (grown == m).all():
             break
         m = grown
