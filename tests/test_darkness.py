@@ -25,12 +25,14 @@ BOX = (8, 28)   # rows and columns 8..27 of the 48 x 48 frame are made black
 RADIANCE = ("R", "G", "B", "diffuse.", "specular.", "emission.", "lg_")
 
 
+def radiance_columns(img: DeepImage) -> list:
+    return [i for i, c in enumerate(img.channels) if c in RADIANCE[:3] or c.startswith(RADIANCE[3:])]
+
+
 def without_light(img: DeepImage, bins: np.ndarray) -> DeepImage:
     """img with every radiance channel of `bins` (bool [N]) set to exactly 0; alpha, depth and guides kept."""
     vals = img.values.copy()
-    for i, c in enumerate(img.channels):
-        if c in RADIANCE[:3] or c.startswith(RADIANCE[3:]):
-            vals[bins, i] = 0
+    vals[np.ix_(bins, radiance_columns(img))] = 0
     return img.with_values(vals)
 
 
@@ -222,3 +224,15 @@ def test_light_groups_in_one_step_through_a_shot(tmp_path):
         assert np.abs(lg - rgb).max() < 1e-5 * np.abs(rgb).max()
         dark = darkness.dark_bins(src, detect(src))
         assert dark[src.ids["id"] == 5].all() and np.abs(lg[dark]).max() == 0 == np.abs(rgb[dark]).max()
+
+
+@pytest.mark.parametrize("stops", [-6, 6])
+def test_the_kept_bins_do_not_move_with_exposure(stops):
+    """The rule reads which colours are exactly 0, which an exposure change keeps: the same bins are kept (so the
+    exposure invariance of tests/test_prior.py holds with it)."""
+    img = held_out(blackened(read_deep(SHOT / "noisy_spp16.0001.exr")), 5)
+    k = np.float32(2.0 ** stops)
+    vals = img.values.copy()
+    vals[:, radiance_columns(img)] *= k
+    np.testing.assert_array_equal(darkness.dark_bins(img.with_values(vals), detect(img)),
+                                  darkness.dark_bins(img, detect(img)))
