@@ -85,8 +85,9 @@ def cli(ctx: click.Context, io_mode: str, debug: bool) -> None:
       info     what is in a deep EXR file (parts, channels, bins per pixel, ...)
       flatten  composite deep EXRs into flat EXR/PNG/JPEG images for review
     """
-    from ranad_core import exr
+    from ranad_core import exr, heap
 
+    heap.keep_freed_memory()   # layers reuse freed pages instead of faulting in fresh ones (heap.py)
     ctx.ensure_object(dict)
     ctx.obj["debug"] = debug
     exr.set_io_mode(io_mode)

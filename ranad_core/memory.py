@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import os
 
+from . import heap
 from .errors import RanadError
 
 KERNEL_CACHE_ENV = "RANAD_RANA_BUFFER_CACHE_MB"
@@ -26,7 +27,9 @@ MARGIN = 0.04                        # of the ceiling: allocator slack, Python o
 
 
 def resident_bytes() -> int:
-    """This process's resident set now (Linux /proc; 0 where it cannot be read)."""
+    """This process's resident set now (Linux /proc; 0 where it cannot be read), after the heap has given back
+    the free memory it keeps for reuse (heap.py), so the figure is what the process uses."""
+    heap.give_back()
     try:
         with open("/proc/self/statm") as f:
             return int(f.read().split()[1]) * os.sysconf("SC_PAGE_SIZE")

@@ -1,0 +1,56 @@
+"""The C allocator's policy for a denoising process: keep freed memory for reuse, give it back when measuring.
+
+Why: every layer of the model writes its outputs into fresh tensors of tens to hundreds of MB. glibc serves
+allocations that large with their own mmap and unmaps them when freed, so each layer's outputs landed on pages
+the kernel first had to fault in and zero: at 1080p that took as long as the layers' arithmetic (a [1M, 32] x
+[32, 96] projection: 138 ms into fresh memory, 61 ms into reused memory; the whole frame 42 s -> 38 s,
+`bench/denoise.py`). `keep_freed_memory` makes glibc serve every allocation from its heap and keep freed blocks
+there, so the next layer reuses the pages already mapped.
+
+The price is that freed memory stays resident until `give_back` returns it (malloc_trim): `memory.py` calls it
+before it measures the process's resident set, so `--max-memory`'s accounting sees what is in use, not what the
+heap keeps for later. Elsewhere than glibc (musl, macOS) both are no-ops.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import sys
+
+_M_TRIM_THRESHOLD, _M_TOP_PAD, _M_MMAP_MAX = -1, -2, -4   # <malloc.h>
+_TOP_PAD = 64 << 20            # heap growth per sbrk: fewer system calls as a tile's tensors grow the heap
+_NEVER_TRIM = (1 << 31) - 1    # mallopt takes an int: 2 GiB of free heap top before free() trims on its own
+
+_state = {"kept": False}
+
+
+def _libc():
+    if not sys.platform.startswith("linux"):
+        return None
+    try:
+        libc = ctypes.CDLL(None)
+        return libc if hasattr(libc, "mallopt") and hasattr(libc, "malloc_trim") else None
+    except OSError:
+        return None
+
+
+def keep_freed_memory() -> bool:
+    """Serve large allocations from the heap and keep freed memory mapped for reuse (process-wide; idempotent).
+    Returns whether the policy is in effect (False where the C library is not glibc)."""
+    if _state["kept"]:
+        return True
+    libc = _libc()
+    if libc is None:
+        return False
+    ok = (libc.mallopt(_M_MMAP_MAX, 0) == 1) & (libc.mallopt(_M_TRIM_THRESHOLD, _NEVER_TRIM) == 1)
+    ok &= libc.mallopt(_M_TOP_PAD, _TOP_PAD) == 1
+    _state["kept"] = bool(ok)
+    return _state["kept"]
+
+
+def give_back() -> None:
+    """Return the heap's free pages to the system (a no-op unless `keep_freed_memory` is in effect)."""
+    if _state["kept"]:
+        libc = _libc()
+        if libc is not None:
+            libc.malloc_trim(0)

@@ -1,0 +1,51 @@
+"""heap.py's allocator policy, checked on a real process: with the policy, freed memory stays mapped (the next
+layer reuses it instead of faulting in fresh pages) until give_back returns it, so memory.resident_bytes, which
+gives back first, still measures what is in use."""
+
+import subprocess
+import sys
+
+import pytest
+
+SCRIPT = r"""
+import sys
+import numpy as np
+from ranad_core import heap, memory
+
+def rss():
+    with open("/proc/self/statm") as f:
+        return int(f.read().split()[1]) * 4096
+
+keep = sys.argv[1] == "keep"
+if keep:
+    assert heap.keep_freed_memory()
+before = rss()
+a = np.ones(64 << 20, dtype=np.uint8)     # 64 MB, every page touched
+held = rss()
+del a
+after_free = rss()
+measured = memory.resident_bytes()       # gives back first
+print(before, held, after_free, measured, rss())
+"""
+
+
+def _run(mode: str) -> list:
+    out = subprocess.run([sys.executable, "-c", SCRIPT, mode], capture_output=True, text=True, check=True)
+    return [int(v) for v in out.stdout.split()]
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="glibc's allocator policy: Linux only")
+def test_freed_memory_is_kept_until_given_back():
+    mb = 1 << 20
+    before, held, after_free, measured, after = _run("keep")
+    assert held - before > 60 * mb
+    assert after_free - before > 60 * mb            # kept mapped for reuse
+    assert measured - before < 8 * mb and after - before < 8 * mb   # given back before measuring
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="glibc's allocator policy: Linux only")
+def test_without_the_policy_freed_memory_goes_back_at_once():
+    mb = 1 << 20
+    before, held, after_free, _, _ = _run("plain")
+    assert held - before > 60 * mb
+    assert after_free - before < 8 * mb
