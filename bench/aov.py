@@ -21,6 +21,9 @@ sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 
 
 def main() -> None:
+    from ranad_core import heap
+
+    heap.keep_freed_memory()   # as the ranad CLI does
     import torch
 
     from denoise import tile_to  # bench/denoise.py

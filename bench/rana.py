@@ -4,7 +4,8 @@ Default problem (issue 3): a 512x512 layout with 0..6 bins per pixel (mean ~3), 
 channels. Prints forward and forward+backward time, query-key pairs per second, GFLOP/s (4*d FLOPs per
 pair per head, the usual attention count: q.k and p.v, multiply and add), peak memory of the process, and
 the speed-up over the reference on a size the reference can handle (``--ref-size``).
-Torch's allocator is asked for transparent huge pages, as the ranad CLI does (THP_MEM_ALLOC_ENABLE=0 to compare).
+Torch's allocator is asked for transparent huge pages and freed memory is kept for reuse (heap.py), as the ranad CLI
+does (THP_MEM_ALLOC_ENABLE=0 to compare the first).
 Both memory layouts of q, k, v are measured at --size (see problem()).
 With a GPU, the CUDA kernels run the same problem too; `--device cuda` runs only them: the staged design (the
 default, at each --chunks size) against the one-thread design it replaced, in the same process.
@@ -24,6 +25,7 @@ os.environ.setdefault("THP_MEM_ALLOC_ENABLE", "1")  # as the ranad CLI does (see
 import torch  # noqa: E402
 
 sys.path.insert(0, os.path.join(os.path.dirname(__file__), ".."))
+from ranad_core import heap  # noqa: E402
 from ranad_core.rana import rana, self_attention_layout  # noqa: E402
 from ranad_core.rana.neighborhood import disc  # noqa: E402
 
@@ -112,6 +114,7 @@ def run(size, radius, heads, dim, backend, repeats, layout="natural"):
 
 
 def main() -> None:
+    heap.keep_freed_memory()   # as the ranad CLI does
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--size", type=int, default=512)
     ap.add_argument("--ref-size", type=int, default=96)

@@ -17,26 +17,10 @@ import traceback
 os.environ.setdefault("THP_MEM_ALLOC_ENABLE", "1")
 
 
-def _keep_freed_memory() -> None:
-    """glibc's malloc: serve blocks up to 32 MB (its ceiling) from the heap and keep freed memory there instead of
-    mapping and unmapping every large tensor. Each fresh mapping costs a page fault and zeroing per page, and the
-    denoiser frees and allocates tensors of a few MB per layer of every tile: measured on a 1080p frame (`python
-    bench/denoise.py --frame ...`), the tiles 37.9 s -> 34.4 s at the same peak memory. Elsewhere (another libc)
-    nothing changes."""
-    import ctypes
+from ranad_core import heap  # noqa: E402
 
-    try:
-        libc = ctypes.CDLL("libc.so.6")
-        mallopt = libc.mallopt
-    except (OSError, AttributeError):
-        return
-    m_trim_threshold, m_top_pad, m_mmap_threshold = -1, -2, -3   # malloc.h
-    mallopt(m_mmap_threshold, 32 << 20)
-    mallopt(m_trim_threshold, 1 << 30)
-    mallopt(m_top_pad, 64 << 20)
-
-
-_keep_freed_memory()
+# the layers' tensors reuse freed pages instead of faulting in fresh ones; before anything allocates (heap.py)
+heap.keep_freed_memory()
 
 import click
 
@@ -85,9 +69,8 @@ def cli(ctx: click.Context, io_mode: str, debug: bool) -> None:
       info     what is in a deep EXR file (parts, channels, bins per pixel, ...)
       flatten  composite deep EXRs into flat EXR/PNG/JPEG images for review
     """
-    from ranad_core import exr, heap
+    from ranad_core import exr
 
-    heap.keep_freed_memory()   # layers reuse freed pages instead of faulting in fresh ones (heap.py)
     ctx.ensure_object(dict)
     ctx.obj["debug"] = debug
     exr.set_io_mode(io_mode)

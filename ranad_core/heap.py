@@ -2,10 +2,12 @@
 
 Why: every layer of the model writes its outputs into fresh tensors of tens to hundreds of MB. glibc serves
 allocations that large with their own mmap and unmaps them when freed, so each layer's outputs landed on pages
-the kernel first had to fault in and zero: at 1080p that took as long as the layers' arithmetic (a [1M, 32] x
-[32, 96] projection: 138 ms into fresh memory, 61 ms into reused memory; the whole frame 42 s -> 38 s,
-`bench/denoise.py`). `keep_freed_memory` makes glibc serve every allocation from its heap and keep freed blocks
-there, so the next layer reuses the pages already mapped.
+the kernel first had to fault in and zero. The first remedy (raising the mmap threshold to glibc's 32 MB ceiling,
+no trimming: bench/denoise.py's held-out 1080p frame 62.7 s -> 49.8 s) left every tensor above 32 MB on fresh
+mappings, and at 1080p most of a tile's are: a [1M, 32] x [32, 96] projection took 138 ms into fresh memory, 61
+ms into reused memory. `keep_freed_memory` makes glibc serve every allocation from its heap (no mmap at all) and
+keep freed blocks there, so the next layer reuses the pages already mapped: the same frame 42.0 s -> 38.6 s
+(`ranad denoise --profile`), output bit-identical.
 
 The price is that freed memory stays resident until `give_back` returns it (malloc_trim): `memory.py` calls it
 before it measures the process's resident set, so `--max-memory`'s accounting sees what is in use, not what the
