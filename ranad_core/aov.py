@@ -63,9 +63,11 @@ def _values(img: DeepImage, m: ChannelMap, layers: dict, perm: np.ndarray) -> di
     img = replace_nonfinite(img, m.depth_channels())[0]
     canon, residual = canonical(img, m)
     n = img.num_bins
-    beauty = np.stack([img.channel(c) for c in m.beauty], 1).astype(np.float64)
-    get = lambda names: (np.stack([canon.channel(c) for c in names], 1).astype(np.float64)  # noqa: E731
-                         if names[0] in canon.channels else np.zeros((n, 3)))
+    beauty = img.columns(m.beauty).astype(np.float64)
+
+    def get(names):
+        return canon.columns(names).astype(np.float64) if names[0] in canon.channels else np.zeros((n, 3))
+
     spec = get(SPECULAR) if m.split else np.zeros((n, 3))
     emit = get(EMISSION)
     safe = np.where(np.abs(beauty) > 1e-12, beauty, 1.0)
@@ -74,7 +76,7 @@ def _values(img: DeepImage, m: ChannelMap, layers: dict, perm: np.ndarray) -> di
     r_d = 1.0 - r_s - r_e
     out = {"diffuse": [], "specular": [], "pass": []}
     for layer, chans in layers.items():
-        v = np.stack([img.channel(c) for c in chans], 1).astype(np.float64)
+        v = img.columns(chans).astype(np.float64)
         rule = kernel_rule(layer)
         if rule == "diffuse" or (rule == "specular" and not m.split):
             parts = (v, 0 * v, 0 * v)
@@ -163,7 +165,7 @@ def denoise_aovs(model, images: list, centre: int, mapping: ChannelMap, layers: 
     noisy = replace_nonfinite(images[centre], mapping.depth_channels())[0]   # the primary pass's _assemble input
     dark = darkness.dark_bins(noisy, mapping, dark_radius)
     if dark is not None:
-        out[dark] = np.stack([noisy.channel(c) for chans in layers.values() for c in chans], 1)[dark]
+        out[dark] = noisy.columns([c for chans in layers.values() for c in chans])[dark]
     return {layer: out[:, 3 * i:3 * i + 3] for i, layer in enumerate(layers)}
 
 
@@ -206,7 +208,7 @@ def denoise_cached_frame(loaded, cache_path: str, tensors: dict, meta: dict, pat
             continue
         if not (a_img.offsets.shape == b_img.offsets.shape and (a_img.offsets == b_img.offsets).all()):
             raise RanadError("bin layout differs from the denoised beauty's (another render?)", p)
-        cols = np.stack([a_img.channel(c) for c in names], 1)
+        cols = a_img.columns(names)
         keep = [c for c in b_img.channels if c not in names]
         base = b_img.select(keep)
         combined.append(base.with_values(np.concatenate([base.values, cols], 1), keep + names))

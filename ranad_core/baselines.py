@@ -22,7 +22,7 @@ EPS = 1e-6
 def _composite(img: DeepImage, names, premultiplied: bool) -> np.ndarray:
     """[P, len(names)] front-to-back composite of sorted `img`; unpremultiplied channels (albedo, normal) are
     weighted by each bin's visible coverage T_i a_i and normalised by the pixel's alpha."""
-    return composite_columns(img, np.stack([img.channel(n) for n in names], 1), premultiplied)
+    return composite_columns(img, img.columns(names), premultiplied)
 
 
 def composite_columns(img: DeepImage, cols: np.ndarray, premultiplied: bool) -> np.ndarray:

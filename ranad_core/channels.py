@@ -111,7 +111,7 @@ class MotionSpec:
         chans = self.channels(direction)
         if not chans or not all(c in img.channels for c in chans):
             return None
-        v = np.stack([img.channel(c) for c in chans], 1).astype(np.float64)
+        v = img.columns(chans).astype(np.float64)
         v = np.nan_to_num(v, nan=0.0, posinf=0.0, neginf=0.0) * np.asarray(self.scale(img))
         return v.astype(np.float32)
 
@@ -187,9 +187,9 @@ def layer_values(img: DeepImage, chans) -> np.ndarray | None:
     parts = layer_parts(chans)
     if not parts:
         return None
-    out = np.stack([img.channel(c) for c in parts[0]], 1).astype(np.float32)
+    out = img.columns(parts[0]).astype(np.float32, copy=False)
     for p in parts[1:]:
-        out = out + np.stack([img.channel(c) for c in p], 1).astype(np.float32)
+        out = out + img.columns(p).astype(np.float32, copy=False)
     return out
 
 
@@ -200,7 +200,7 @@ def split_layer(img: DeepImage, chans, total: np.ndarray) -> list:
     parts = layer_parts(chans)
     if len(parts) == 1:
         return [(parts[0], total)]
-    noisy = [np.nan_to_num(np.stack([img.channel(c) for c in p], 1).astype(np.float64)) for p in parts]
+    noisy = [np.nan_to_num(img.columns(p).astype(np.float64)) for p in parts]
     s = sum(noisy)
     ok = np.abs(s) > 1e-12
     safe = np.where(ok, s, 1.0)
@@ -368,47 +368,40 @@ def canonical(img: DeepImage, m: ChannelMap) -> tuple[DeepImage, np.ndarray | No
 
     In full mode the residual is beauty - diffuse - specular - emission (what the split leaves out); in no-split
     mode the canonical diffuse is beauty - emission and there is no residual."""
-    cols, names = [], []
+    blocks, names = [], []   # [N, k] blocks joined once at the end (row-wise copies, not one strided pass per column)
 
-    def put(name, data):
-        names.append(name)
-        cols.append(np.asarray(data, np.float32))
+    def put(block_names, data):
+        names.extend(block_names)
+        blocks.append(np.asarray(data, np.float32).reshape(img.num_bins, len(block_names)))
 
     def get(layer):
         return layer_values(img, m.layers.get(layer))
 
-    beauty = np.stack([img.channel(c) for c in m.beauty], 1)
+    beauty = img.columns(m.beauty)
     emission = get("emission")
     residual = None
     if m.split:
         diffuse, specular = get("diffuse"), get("specular")
         residual = beauty - diffuse - specular - (emission if emission is not None else 0)
-        for i in range(3):
-            put(DIFFUSE[i], diffuse[:, i])
-            put(SPECULAR[i], specular[:, i])
+        put([c for i in range(3) for c in (DIFFUSE[i], SPECULAR[i])], np.stack([diffuse, specular], 2))
     else:
-        diffuse = beauty - (emission if emission is not None else 0)
-        for i in range(3):
-            put(DIFFUSE[i], diffuse[:, i])
+        put(list(DIFFUSE), beauty - (emission if emission is not None else 0))
     if emission is not None:
-        for i in range(3):
-            put(EMISSION[i], emission[:, i])
+        put(list(EMISSION), emission)
     for layer, canonical_names in (("albedo", ALBEDO), ("normal", NORMAL)):
         data = get(layer) if m.guides else None
         if data is not None:
-            for i, name in enumerate(canonical_names):
-                put(name, data[:, i])
-    put(ALPHA, img.channel(m.alpha))
-    put(DEPTH, img.channel(m.depth))
+            put(list(canonical_names), data)
+    direct = [(ALPHA, m.alpha), (DEPTH, m.depth)]
     if m.depth_back:
-        put(DEPTH_BACK, img.channel(m.depth_back))
+        direct.append((DEPTH_BACK, m.depth_back))
     if m.coverage:
-        put(COVERAGE, img.channel(m.coverage))
+        direct.append((COVERAGE, m.coverage))
     for names_ in (PRIOR, FLAT_NOISY):   # a flat prior ranad attached to the frame (carried through compensation)
         if all(c in img.channels for c in names_):
-            for c in names_:
-                put(c, img.channel(c))
-    values = np.stack(cols, 1) if cols else np.zeros((img.num_bins, 0), np.float32)
+            direct += [(c, c) for c in names_]
+    put([c for c, _ in direct], img.columns([src for _, src in direct]))
+    values = np.concatenate(blocks, 1)
     out = DeepImage(values=values, offsets=img.offsets, channels=names, data_window=img.data_window,
                     display_window=img.display_window)
     return out, residual

@@ -123,6 +123,12 @@ class DeepImage:
     def has(self, name: str) -> bool:
         return name in self.channels or name in self.ids
 
+    def columns(self, names) -> np.ndarray:
+        """[N, len(names)] copy of the value channels `names`, rows contiguous: one row-wise gather, where stacking
+        the strided column views one by one read the whole [N, C] array once per column (20 columns of 3 M bins:
+        0.08 s against 0.54 s)."""
+        return np.take(self.values, [self.channel_index(n) for n in names], axis=1)
+
     def channel(self, name: str) -> np.ndarray:
         """float32 [N] view of one non-id channel, or the uint32 [N] id channel of that name."""
         if name in self.ids:

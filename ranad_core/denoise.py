@@ -257,7 +257,7 @@ class FramePrior:
     @classmethod
     def of(cls, img: DeepImage, mapping: ChannelMap) -> "FramePrior":
         fr = _model_frame(img, mapping, "prior", merge_gap=0.0)   # per-pixel values: merging changes nothing
-        cols = np.stack([fr.srt.channel(c) for c in (*PRIOR, *FLAT_NOISY)], 1)
+        cols = fr.srt.columns((*PRIOR, *FLAT_NOISY))
         return cls(unsort(cols, fr.perm), fr.scale)
 
     def attached(self, img: DeepImage) -> DeepImage:

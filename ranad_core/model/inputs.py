@@ -112,7 +112,7 @@ def prior_guides(features: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
 
 
 def _cols(img: DeepImage, names) -> np.ndarray:
-    return np.stack([img.channel(n) for n in names], 1).astype(np.float32)
+    return img.columns(names).astype(np.float32, copy=False)
 
 
 def _has(img: DeepImage, names) -> bool:

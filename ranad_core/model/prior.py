@@ -33,11 +33,11 @@ def beauty(img: DeepImage, residual: np.ndarray | None = None) -> np.ndarray:
     """[N, 3] per-bin beauty of a canonical image: diffuse + specular + emission (+ the residual the split leaves
     out); a file in ranad synth's convention may be passed as is (its R, G, B are used)."""
     if all(c in img.channels for c in RGB):
-        return np.stack([img.channel(c) for c in RGB], 1).astype(np.float32)
+        return img.columns(RGB).astype(np.float32)
     out = np.zeros((img.num_bins, 3), np.float32)
     for names in (DIFFUSE, SPECULAR, EMISSION):
         if names[0] in img.channels:
-            out += np.stack([img.channel(c) for c in names], 1)
+            out += img.columns(names)
     if residual is not None:
         out += residual
     return out
@@ -122,7 +122,7 @@ def flat_images(srt: DeepImage, rgb: np.ndarray, guides: bool) -> tuple[np.ndarr
     groups = [(np.maximum(np.nan_to_num(rgb, nan=0.0, posinf=0.0), 0), True)]
     aux = guides and all(c in srt.channels for names in AUX for c in names)
     if aux:
-        groups += [(np.stack([srt.channel(c) for c in names], 1), False) for names in AUX]
+        groups += [(srt.columns(names), False) for names in AUX]
     flat, *flat_aux = composite_groups(srt, groups)
     if srt.num_bins == 0 or h * w == 0:
         return flat, flat.copy()
@@ -170,5 +170,5 @@ def frame_scale(img: DeepImage) -> float:
     if img.num_bins == 0:
         return 1.0
     starts = img.offsets[:-1][np.diff(img.offsets) > 0]
-    flat = np.stack([img.channel(c) for c in FLAT_NOISY], 1)[starts]
+    flat = img.columns(FLAT_NOISY)[starts]
     return exposure_scale(flat)
