@@ -206,7 +206,28 @@ inline std::enable_if_t<std::is_same_v<V, f64x8> || std::is_same_v<V, f64x4>, V>
 
 // log2 of positive lanes (the forward's log-sum-exp, once per block). AVX-512: exponent and mantissa in [3/4, 3/2)
 // by vgetexp/vgetmant, then log2(m) = 2/ln2 atanh(t), t = (m - 1)/(m + 1) in (-1/7, 1/5], to t^9 (truncation
-// error below 6e-9).
+// error below 6e-9). Other float vectors: the same from the bits (fast_log2_lanes; positive normal inputs, which
+// the log-sum-exp's sums are: at least 1).
+#define RANA_LOG2_ATANH(t, t2)                                                                                 \
+  ((((float(2 * kLog2e / 9) * (t2) + float(2 * kLog2e / 7)) * (t2) + float(2 * kLog2e / 5)) * (t2) +           \
+    float(2 * kLog2e / 3)) * (t2) + float(2 * kLog2e)) * (t)
+#if !defined(__CUDACC__)
+// The same steps on every lane of a float vector F (I: the int32 vector of as many lanes), from the bits: exponent
+// k and mantissa m in [1, 2), halved (k + 1) where m >= 3/2. Replaced a libm log2f call per lane on AVX2 (3.7% of
+// the forward's time at 1.5 bins per pixel, one thread).
+template <typename F, typename I>
+inline F fast_log2_lanes(F x) {
+  const I bits = reinterpret_cast<const I&>(x);
+  I k = (bits >> 23) - 127;
+  const I mbits = (bits & 0x007fffff) | 0x3f800000;
+  F m = reinterpret_cast<const F&>(mbits);
+  const I big = m >= 1.5f;   // -1 (all bits) where true
+  m = big ? m * 0.5f : m;
+  k -= big;
+  const F t = (m - 1.0f) / (m + 1.0f), t2 = t * t;
+  return RANA_LOG2_ATANH(t, t2) + __builtin_convertvector(k, F);
+}
+#endif
 template <typename V>
 RANA_HD V fast_log2(V x) {
   if constexpr (Lanes<V>::L == 1) {
@@ -227,6 +248,9 @@ RANA_HD V fast_log2(V x) {
       const __m512 r = _mm512_fmadd_ps(p, t, k);
       return reinterpret_cast<const V&>(r);
     }
+#endif
+#if !defined(__CUDACC__)
+    if constexpr (std::is_same_v<V, f32x8>) return fast_log2_lanes<f32x8, i32x8>(x);
 #endif
     for (int i = 0; i < Lanes<V>::L; ++i) x[i] = std::log2(x[i]);
     return x;
