@@ -48,6 +48,29 @@ torch::Tensor head_grouped(const torch::Tensor& x, int64_t G) {
   return out;
 }
 
+// pad_to, then head_grouped, in one pass: [N, h, c] (any strides) -> [N, H / G, d, G] with zero heads and channels
+// appended. The forward's values are rarely of a compiled size (a reconstruction's 6 or 1 channels, padded to 8 or
+// 3): padding then grouping made two copies of the operand, and torch's padding a third of its contiguous().
+torch::Tensor grouped_padded(const torch::Tensor& x, int64_t H, int64_t d, int64_t G) {
+  if (x.size(1) == H && x.size(2) == d) return head_grouped(x, G);
+  const int64_t n = x.size(0), h0 = x.size(1), c0 = x.size(2);
+  auto out = rana_cpu_buffers::empty({n, H / G, d, G}, x.options());
+  AT_DISPATCH_FLOATING_TYPES(x.scalar_type(), "grouped_padded", [&] {
+    const scalar_t* src = x.data_ptr<scalar_t>();
+    const int64_t sN = x.stride(0), sH = x.stride(1), sC = x.stride(2);
+    scalar_t* dst = out.data_ptr<scalar_t>();
+    at::parallel_for(0, n, 4096, [&](int64_t b, int64_t e) {
+      for (int64_t j = b; j < e; ++j) {
+        scalar_t* row = dst + j * H * d;
+        for (int64_t h = 0; h < H; ++h)
+          for (int64_t c = 0; c < d; ++c)
+            row[((h / G) * d + c) * G + h % G] = h < h0 && c < c0 ? src[j * sN + h * sH + c * sC] : scalar_t(0);
+      }
+    });
+  });
+  return out;
+}
+
 // Queries sorted by centre pixel: CSR over the key grid and the order (see rana_cpu::QueryIndex).
 struct QueryOrder {
   std::vector<int64_t> ptr;
@@ -132,7 +155,7 @@ std::vector<torch::Tensor> rana_forward(torch::Tensor q, torch::Tensor k, torch:
   const Plan pl = plan_for(H, q.size(2), dv, q.scalar_type() == torch::kDouble, scalar_lanes);
   const QueryOrder qo = order_queries(q_pixels, Hk, Wk);
   const auto qp = pad_to(q, pl.H, pl.dk);
-  const auto kt = head_grouped(pad_to(k, pl.H, pl.dk), pl.HB), vt = head_grouped(pad_to(v, pl.H, pl.dv), pl.HB);
+  const auto kt = grouped_padded(k, pl.H, pl.dk, pl.HB), vt = grouped_padded(v, pl.H, pl.dv, pl.HB);
   auto out = rana_cpu_buffers::empty({nq, pl.H, pl.dv}, q.options());
   auto lse = torch::empty({nq, pl.H}, q.options());
   AT_DISPATCH_FLOATING_TYPES(q.scalar_type(), "rana_forward", [&] {

@@ -115,17 +115,20 @@ class KernelAttention(nn.Module):
         extra = sum(t.shape[2] for t in qs)
         wide = next(w for w in (8, 16, 32, 64, 128) if w >= d + extra)
         s = math.sqrt(wide)
-        qa, ka = q.new_empty(nq, H, wide), k.new_empty(nk, H, wide)
-        qa[..., :d] = q * (s / math.sqrt(d))
-        ka[..., :d] = k
+        # written channel-major ([N, d', H], returned as its [N, H, d'] view), the layout the kernels stream
+        # without a copy, as the projections themselves are (layers.py)
+        qa, ka = q.new_empty(nq, wide, H), k.new_empty(nk, wide, H)
+        qa[:, :d] = q.transpose(1, 2) * (s / math.sqrt(d))
+        ka[:, :d] = k.transpose(1, 2)
         at = d
         for tq, tk in zip(qs, ks):
             c = tq.shape[2]
-            qa[..., at:at + c] = tq * s
-            ka[..., at:at + c] = tk
+            qa[:, at:at + c] = tq.transpose(1, 2) * s
+            ka[:, at:at + c] = tk.transpose(1, 2)
             at += c
-        qa[..., at:] = 0
-        ka[..., at:] = 0
+        qa[:, at:] = 0
+        ka[:, at:] = 0
+        qa, ka = qa.transpose(1, 2), ka.transpose(1, 2)
         return qa, ka
 
     def _fused_forward(self, q_feat, k_feat, q_pixels, keys: Layout, values: torch.Tensor, guide=None
@@ -187,8 +190,10 @@ class Reconstruction(nn.Module):
         outs = [self.per_scale[s](feat, feats[s], layout.pixels, layouts[s], images[s],
                                   None if guide is None else (guide[0], guides[s][1]))  # stage 2
                 for s in range(self.scales)]
-        w = torch.softmax(self.mixer(feat), dim=1)  # stage 3: per-bin convex mix of the scales
-        out = sum(w[:, s:s + 1] * outs[s] for s in range(self.scales))
+        # stage 3: per-bin convex mix of the scales; the softmax runs over the scales of the [scales, N] view, along
+        # which torch vectorises over the bins (over the 2-3 scales of each bin's row it took 4x as long)
+        w = torch.softmax(self.mixer(feat).t(), dim=0)
+        out = sum(w[s, :, None] * outs[s] for s in range(self.scales))
         if self.residual is not None:
             if out.shape[1] != 1:
                 raise ValueError(f"a residual reconstruction has one channel (alpha), got values of {out.shape[1]}")
