@@ -8,7 +8,7 @@ a learned layer's outputs is as good as another.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import torch
 from torch import nn
@@ -19,11 +19,14 @@ from . import fused
 
 @dataclass
 class Layout:
-    """Bins of one scale: offsets [H*W+1] over the grid, and each bin's (y, x) (cached: every layer needs it)."""
+    """Bins of one scale: offsets [H*W+1] over the grid, and each bin's (y, x) (cached: every layer needs it).
+    `dropouts` keeps bin_dropout's results for this layout: the reconstructions drop the bins the backbone's first
+    U-Net already dropped (the same pattern and level), five times per tile."""
     offsets: torch.Tensor
     height: int
     width: int
     pixels: torch.Tensor
+    dropouts: dict = field(default_factory=dict, repr=False, compare=False)
 
     @classmethod
     def of(cls, offsets: torch.Tensor, height: int, width: int) -> "Layout":
@@ -62,6 +65,13 @@ def bin_dropout(layout: Layout, pattern: int, level: int = 1, lattice: bool = Fa
     all fail the other pattern), so on a typical frame it holds a few percent of the bins, those of multi-bin
     pixels only. Returns (kept row indices into the fine layout, the coarse layout).
     """
+    key = (pattern, level if lattice else 1, lattice)   # without the lattice, every level drops alike
+    if key not in layout.dropouts:
+        layout.dropouts[key] = _bin_dropout(layout, pattern, level, lattice)
+    return layout.dropouts[key]
+
+
+def _bin_dropout(layout: Layout, pattern: int, level: int, lattice: bool) -> tuple[torch.Tensor, Layout]:
     offs = layout.offsets
     counts = offs[1:] - offs[:-1]
     pix = layout.pixels[:, 0] * layout.width + layout.pixels[:, 1]
