@@ -55,12 +55,16 @@ void check_vector(const torch::Tensor& v, int64_t n, const char* what) {
               what, ": contiguous float32 [", n, "] expected");
 }
 
-// LayerNorm of one row (biased variance, as torch's), into out.
+// LayerNorm of one row (biased variance, as torch's), into out. The sums are SIMD reductions (partial sums per lane,
+// then added): written as plain loops they were two chains of c dependent adds per row, which at 32 channels made
+// the LayerNorm cost 40% of a 32 -> 96 projection.
 inline void layer_norm_row(const float* x, int64_t c, const float* w, const float* b, double eps, float* out) {
   float mean = 0.f;
+#pragma omp simd reduction(+ : mean)
   for (int64_t i = 0; i < c; ++i) mean += x[i];
   mean /= float(c);
   float var = 0.f;
+#pragma omp simd reduction(+ : var)
   for (int64_t i = 0; i < c; ++i) {
     const float d = x[i] - mean;
     var += d * d;
