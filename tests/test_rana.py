@@ -152,6 +152,22 @@ def test_channel_major_inputs_need_no_copy_and_agree():
     torch.testing.assert_close(res[0][0].detach(), ref, atol=1e-5, rtol=1e-5)
 
 
+@pytest.mark.parametrize("name", ["self", "down", "up", "temporal"])
+@pytest.mark.parametrize("heads,d", [(4, 8), (8, 8), (4, 16)])
+def test_channel_major_blocks_of_four_heads_agree_with_the_oracle(name, heads, d):
+    """The model's own case: q, k, v as channel-major views, 4 heads per block (one or two head groups, so the
+    second group's rows start at head 4), value rows of 8 or 16 channels (stored by whole rows on AVX2); every
+    layout, so blocks of one entry (a row's last) and of two occur. The outputs against the reference."""
+    qp, ko, ks = {n: (a, b, c) for n, a, b, c in layouts()}[name]
+    nq, nk = qp.shape[0], int(ko[-1])
+    g = torch.Generator().manual_seed(11)
+    q, k, v = (torch.randn(n, d, heads, generator=g).transpose(1, 2) for n in (nq, nk, nk))
+    bias = torch.randn(heads, 5, 5, generator=g)
+    out = rana(q, k, v, qp, ko, ks, 2.5, bias, backend="cpu")
+    ref = rana(q, k, v, qp, ko, ks, 2.5, bias, backend="reference")
+    torch.testing.assert_close(out, ref, atol=1e-5, rtol=1e-5)
+
+
 def _counts(name):
     """(queries, key bins) of one of the test layouts."""
     qp, ko, _ = {n: (a, b, c) for n, a, b, c in layouts()}[name]
