@@ -358,6 +358,17 @@ def test_associated_alpha_follows_the_spec_example():
             assert (rr is None and r == DEPTH) or (rr == "" and r == NO_ALPHA) or chans[r] == rr, name
 
 
+def test_columns_equal_the_stacked_channels_in_the_order_asked():
+    img = make_messy(3, CH_LAYERS)
+    names = ["spec.R", "A", "R", "A", "N.x"]          # any order, repeats allowed
+    cols = img.columns(names)
+    assert cols.flags["C_CONTIGUOUS"] and cols.dtype == img.values.dtype
+    np.testing.assert_array_equal(cols, np.stack([img.channel(n) for n in names], 1))
+    assert img.columns([]).shape == (img.num_bins, 0)
+    with pytest.raises(KeyError):
+        img.columns(["R", "nope"])
+
+
 def test_select_by_name_and_layer():
     img = make_messy(0, CH_LAYERS)
     sub = img.select(["diffuse", "Z", "id"])

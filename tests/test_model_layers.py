@@ -29,6 +29,23 @@ def test_bin_dropout_halves_each_pixel_and_patterns_alternate():
     assert torch.equal(lay.pixels[k0], c0.pixels)
 
 
+def test_bin_dropout_is_computed_once_per_layout_pattern_and_level():
+    """The reconstructions reuse the backbone's dropouts (Layout.dropouts): the same call gives the same tensors,
+    and every (pattern, level, lattice) its own, equal to a fresh computation on a fresh layout."""
+    from ranad_core.model.layers import _bin_dropout
+
+    lay = layout()
+    for lattice in (False, True):
+        for level in (1, 2, 3):
+            for pattern in (0, 1):
+                kept, coarse = bin_dropout(lay, pattern, level, lattice)
+                again = bin_dropout(lay, pattern, level, lattice)
+                assert again[0] is kept and again[1] is coarse
+                fresh_kept, fresh = _bin_dropout(layout(), pattern, level, lattice)
+                assert torch.equal(kept, fresh_kept) and torch.equal(coarse.offsets, fresh.offsets)
+                assert torch.equal(coarse.pixels, fresh.pixels)
+
+
 def test_lattice_dropout_keeps_single_bin_pixels_on_ever_sparser_lattices():
     """A frame of single-bin pixels, four down-sampling levels, both patterns at each level: with the lattice,
     level L keeps exactly 1/2^L of the pixels, each level's bins are a subset of the level above's, and from level

@@ -153,11 +153,12 @@ def test_channel_major_inputs_need_no_copy_and_agree():
 
 
 @pytest.mark.parametrize("name", ["self", "down", "up", "temporal"])
-@pytest.mark.parametrize("heads,d", [(4, 8), (8, 8), (4, 16)])
-def test_channel_major_blocks_of_four_heads_agree_with_the_oracle(name, heads, d):
-    """The model's own case: q, k, v as channel-major views, 4 heads per block (one or two head groups, so the
-    second group's rows start at head 4), value rows of 8 or 16 channels (stored by whole rows on AVX2); every
-    layout, so blocks of one entry (a row's last) and of two occur. The outputs against the reference."""
+@pytest.mark.parametrize("heads,d", [(4, 8), (8, 8), (4, 16), (2, 6), (2, 13)])
+def test_channel_major_operands_of_the_models_sizes_agree_with_the_oracle(name, heads, d):
+    """The model's own cases: q, k, v as channel-major views; 4 heads per block (one or two head groups, so the
+    second group's rows start at head 4), value rows of 8 or 16 channels (stored by whole rows on AVX2); 2 heads of
+    sizes the kernels pad (a reconstruction's 6 value channels, a gated one's 13 q/k channels: padded and grouped in
+    one pass). Every layout, so blocks of one entry (a row's last) and of several occur. Against the reference."""
     qp, ko, ks = {n: (a, b, c) for n, a, b, c in layouts()}[name]
     nq, nk = qp.shape[0], int(ko[-1])
     g = torch.Generator().manual_seed(11)
