@@ -25,7 +25,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import torch
 
-from . import binmerge, darkness
+from . import binmerge, darkness, heap
 from .binmerge import Groups
 from .channels import (ALPHA, DEPTH, DEPTH_BACK, DEPTHS, FLAT_NOISY, PRIOR, ChannelMap, canonical, detect,
                        layer_values, split_layer)
@@ -351,6 +351,7 @@ def _denoise_window(model, images, centre, mapping, tile, halo, keep_noisy, want
         # thin bins are merged in every frame of the window (a thin neighbour left as it is costs the cross-frame
         # model: runs/bin-merge-s15)
         frames = [_model_frame(m, mapping, features, p, merge_gap) for m, p in zip(moved, carried)]
+    heap.relieve()   # the prior's freed scratch, where the resident set nears the memory ceiling
     c = frames[centre]
     n = c.srt.num_bins
     h, w = c.srt.height, c.srt.width
@@ -398,6 +399,7 @@ def _denoise_window(model, images, centre, mapping, tile, halo, keep_noisy, want
                             kf = _core_mask(local, win, core)
                             embs[f][idx[kf]] = feats[f].cpu().numpy()[kf].astype(np.float16)
                 record_tile(sum(int(p[1].size) for p in parts), int(keep.sum()), time.perf_counter() - t_tile)
+        heap.relieve()
         if progress:
             progress(1)
     with stage("assemble"):

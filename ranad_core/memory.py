@@ -30,11 +30,7 @@ def resident_bytes() -> int:
     """This process's resident set now (Linux /proc; 0 where it cannot be read), after the heap has given back
     the free memory it keeps for reuse (heap.py), so the figure is what the process uses."""
     heap.give_back()
-    try:
-        with open("/proc/self/statm") as f:
-            return int(f.read().split()[1]) * os.sysconf("SC_PAGE_SIZE")
-    except (OSError, ValueError, IndexError):
-        return 0
+    return heap.resident_now()
 
 
 def cap_kernel_cache(max_memory: float) -> None:

@@ -19,6 +19,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import cache as cache_io
+from . import heap
 from .channels import REQUIRED, detect, motion_candidates
 from .denoise import (ALIGN, CPU_TILE_BINS, choose_tile, denoise_window, halo_for, is_cross_frame, model_features,
                       tile_bytes)
@@ -342,6 +343,7 @@ def denoise_shot(jobs, loaded, opts: ShotOptions, frame_bar=None, tile_bar=None,
     of the neighbouring frames (found by name, else by index); the output holds every part of the input, the
     others copied byte for byte (exr.write_parts). Each frame keeps its own data window."""
     summary = ShotSummary()
+    heap.set_ceiling(opts.max_memory)   # kept freed memory goes back before it nears the ceiling (heap.relieve)
     model = loaded.model
     halo = halo_for(model) if opts.halo is None else opts.halo
     if opts.tile is None:

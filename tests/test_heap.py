@@ -16,7 +16,7 @@ def rss():
     with open("/proc/self/statm") as f:
         return int(f.read().split()[1]) * 4096
 
-if sys.argv[1] == "keep" and not heap.keep_freed_memory():
+if sys.argv[1] in ("keep", "relieve") and not heap.keep_freed_memory():
     print("unsupported")
     sys.exit(0)
 before = rss()
@@ -24,6 +24,14 @@ a = np.ones(64 << 20, dtype=np.uint8)     # 64 MB, every page touched
 held = rss()
 del a
 after_free = rss()
+if sys.argv[1] == "relieve":              # under a ceiling far above the process: kept; just above it: given back
+    heap.set_ceiling(1e15)
+    assert not heap.relieve() and rss() - before > 60 << 20
+    heap.set_ceiling(rss() / heap.RELIEVE_AT * 0.99)
+    assert heap.relieve()
+    heap.set_ceiling(None)
+    print(before, held, after_free, rss(), rss())
+    sys.exit(0)
 measured = memory.resident_bytes()       # gives back first
 print(before, held, after_free, measured, rss())
 """
@@ -51,3 +59,13 @@ def test_without_the_policy_freed_memory_goes_back_at_once():
     before, held, after_free, _, _ = _run("plain")
     assert held - before > 60 * mb
     assert after_free - before < 8 * mb
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="glibc's allocator policy: Linux only")
+def test_kept_memory_goes_back_only_near_the_ceiling():
+    """heap.relieve, called between a denoise's stages and tiles: below RELIEVE_AT of the --max-memory ceiling the
+    kept memory stays for reuse; above it, it goes back."""
+    mb = 1 << 20
+    before, held, after_free, relieved, _ = _run("relieve")
+    assert after_free - before > 60 * mb
+    assert relieved - before < 8 * mb
