@@ -31,7 +31,7 @@ _NEVER_TRIM = (1 << 31) - 1    # mallopt takes an int: 2 GiB of free heap top be
 
 RELIEVE_AT = 0.8               # of the ceiling: the resident set above which relieve() gives kept memory back
 
-_state = {"kept": False, "ceiling": None}
+_state = {"libc": None, "ceiling": None}   # libc: glibc's handle once the policy is in effect
 
 
 def _libc():
@@ -47,23 +47,22 @@ def _libc():
 def keep_freed_memory() -> bool:
     """Serve large allocations from the heap and keep freed memory mapped for reuse (process-wide; idempotent).
     Returns whether the policy is in effect (False where the C library is not glibc)."""
-    if _state["kept"]:
+    if _state["libc"] is not None:
         return True
     libc = _libc()
     if libc is None:
         return False
     ok = (libc.mallopt(_M_MMAP_MAX, 0) == 1) & (libc.mallopt(_M_TRIM_THRESHOLD, _NEVER_TRIM) == 1)
     ok &= libc.mallopt(_M_TOP_PAD, _TOP_PAD) == 1
-    _state["kept"] = bool(ok)
-    return _state["kept"]
+    if ok:
+        _state["libc"] = libc
+    return bool(ok)
 
 
 def give_back() -> None:
     """Return the heap's free pages to the system (a no-op unless `keep_freed_memory` is in effect)."""
-    if _state["kept"]:
-        libc = _libc()
-        if libc is not None:
-            libc.malloc_trim(0)
+    if _state["libc"] is not None:
+        _state["libc"].malloc_trim(0)
 
 
 def resident_now() -> int:
@@ -84,7 +83,7 @@ def relieve() -> bool:
     """Gives the kept memory back when the resident set is above RELIEVE_AT of the ceiling (called between a
     denoise's stages and tiles); returns whether it did."""
     ceiling = _state["ceiling"]
-    if not _state["kept"] or not ceiling or resident_now() <= RELIEVE_AT * ceiling:
+    if _state["libc"] is None or not ceiling or resident_now() <= RELIEVE_AT * ceiling:
         return False
     give_back()
     return True
