@@ -46,8 +46,14 @@ from .params import int_list as _int_list
               show_default=True,
               help="Albedo/normal guides: the first surface's own, or (through-specular) those of the first surface "
                    "behind smooth glass and mirrors, as OIDN asks and renderers' denoising AOVs write.")
+@click.option("--pixel-filter", type=click.Choice(["box", "gaussian"]), default="box", show_default=True,
+              help="Film filter of noisy frames and references: box (each sample in its own pixel) or gaussian "
+                   "(each sample weighted into every pixel within --filter-width, as most renderers' default "
+                   "filters do: noise correlated between neighbours, edge pixels with their neighbours' bins).")
+@click.option("--filter-width", default=2.0, show_default=True, type=click.FloatRange(1.0, 6.0),
+              help="The Gaussian's width in pixels (Arnold's and RenderMan's default: 2).")
 def synth_cmd(out, scenes, size, frames, spp, ref_spp, seed, presets, kinds, workers, ref_frames, motion, bin_gap,
-              sampler, guides):
+              sampler, guides, pixel_filter, filter_width):
     """Render SCENES procedural animated scenes: every frame at each noisy spp, and the centre frame's
     reference binned into each noisy image's bins, as deep-Z and deep-OID EXRs with a manifest per scene.
 
@@ -62,7 +68,8 @@ def synth_cmd(out, scenes, size, frames, spp, ref_spp, seed, presets, kinds, wor
     cfg = dataset.SynthConfig(out=out, scenes=scenes, size=size, frames=frames, spp=_int_list(spp), ref_spp=ref_spp,
                               seed=seed, presets=tuple(presets) or PRESETS,
                               kinds=tuple(kinds) or ("deepz", "deepoid"), ref_frames=ref_frames,
-                              motion=motion, bin_gap=bin_gap, sampler=sampler, guides=guides)
+                              motion=motion, bin_gap=bin_gap, sampler=sampler, guides=guides,
+                              pixel_filter=pixel_filter, filter_width=filter_width)
     skipped = sum(dataset.is_done(cfg, i) for i in range(scenes))
     try:
         with tqdm(total=scenes - skipped, desc="synth", unit="scene", disable=scenes - skipped <= 1) as bar:

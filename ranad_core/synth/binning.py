@@ -8,6 +8,8 @@ Rules (documented in README, "Synthetic data"):
   many thin bins, as renderers that merge less do); no id channel.
 * Per bin: the mean of every attribute (albedo, normal, position, motion), `coverage` = samples in the bin / spp,
   Z = ZBack = the mean depth (surfaces are points, not volumes), and radiance-like channels as sums / spp.
+  With a pixel filter (pixel_filter.py) a sample counts in every pixel its filter reaches, with its weight, and
+  spp becomes the pixel's total weight: means are weighted, coverage the bin's share of the pixel's weight.
 * EXR alpha: bins are ordered front to back and bin i gets A_i = c_i / (1 - sum_{j<i} c_j) with its colours
   divided by the same (1 - sum_{j<i} c_j), so that compositing the bins "over" each other gives exactly the
   pixel's mean radiance (the coverages are disjoint sample sets, not layers).
@@ -145,13 +147,20 @@ def _sample_matrix(s: dict):
         for k, w in zip(names, widths):
             mat[:, c:c + w] = s[k].reshape(n, w)
             c += w
+        total = sum(s[k] for k in SUMMED).sum(axis=1).astype(np.float64)
+        if "weight" in s:  # a pixel filter's copies (pixel_filter.splat): every sum weighted, column 0 the weight
+            mat *= s["weight"][:, None]
+            total *= s["weight"]
         s["_matrix"] = (torch.from_numpy(mat), names, widths)
-        s["_total"] = sum(s[k] for k in SUMMED).sum(axis=1).astype(np.float64)
+        s["_total"] = total
     return s["_matrix"]
 
 
-def accumulate(s: dict, sample_bin: np.ndarray, nbins: int, acc: dict | None = None) -> dict:
+def accumulate(s: dict, sample_bin: np.ndarray, nbins: int, acc: dict | None = None, npixels: int = 0) -> dict:
     """Adds per-bin sums (count, summed channels, sums of mean channels, depth sum) of samples into acc.
+
+    Filtered samples (a `weight` per sample, pixel_filter.splat) add weighted sums, and each pixel's total weight
+    (misses included; `npixels` pixels) goes to acc["pixel_weight"], what bin_values divides by.
 
     One index_add over a matrix of every channel, built once per sample set and shared by every layout the
     samples are binned into (per-channel bincounts took 40% of a scene's time at 1024 spp). Samples without a
@@ -168,6 +177,9 @@ def accumulate(s: dict, sample_bin: np.ndarray, nbins: int, acc: dict | None = N
     idx = torch.from_numpy(np.where(ok, sample_bin, nbins))
     sums = torch.zeros(nbins + 1, mat.shape[1], dtype=mat.dtype).index_add_(0, idx, mat)[:nbins]
     sums = sums.numpy().astype(np.float64)
+    if "weight" in s:
+        acc["pixel_weight"] = acc.get("pixel_weight", 0.0) + np.bincount(s["pixel"], weights=s["weight"],
+                                                                         minlength=npixels)
     acc["count"] += sums[:, 0]
     acc["z"] += sums[:, 1]
     c = 2
@@ -181,22 +193,27 @@ def accumulate(s: dict, sample_bin: np.ndarray, nbins: int, acc: dict | None = N
 
 
 def bin_values(acc: dict, lay: BinLayout, spp: int) -> dict:
-    """Per-bin channel values from accumulated sums: coverage, EXR alpha, premultiplied radiance, means."""
+    """Per-bin channel values from accumulated sums: coverage, EXR alpha, premultiplied radiance, means.
+
+    Sums are divided by `spp`, or for filtered samples by the bin's pixel's total weight (a film's normalisation).
+    """
     count = acc["count"]
+    if "pixel_weight" in acc:
+        spp = np.maximum(acc["pixel_weight"][lay.pixel], 1e-12)
     cov = count / spp
     offs = lay.offsets
     # coverage of the bins in front of each bin, within its pixel
     before = np.cumsum(cov) - cov
     before -= np.repeat(np.append(before, 0.0)[offs[:-1]], np.diff(offs))
     room = np.maximum(1.0 - before, 1e-12)
-    safe = np.maximum(count, 1)[:, None]
+    safe = np.where(count > 0, count, 1.0)[:, None]   # weighted counts of filtered samples can be below 1
     out = {"coverage": cov, "A": np.clip(cov / room, 0.0, 1.0)}
     for name in SUMMED + ("groups",):
-        out[name] = acc[name] / spp / room[:, None]
+        out[name] = acc[name] / (spp[:, None] if np.ndim(spp) else spp) / room[:, None]
     for name in MEANS:
         if name in acc:
             out[name] = acc[name] / safe
-    mean_z = acc["z"] / np.maximum(count, 1)
+    mean_z = acc["z"] / safe[:, 0]
     out["Z"] = np.where(count > 0, mean_z, 0.5 * (lay.zmin + lay.zmax))
     out["unbinned_energy"] = acc["unbinned"] / acc["total"] if acc["total"] > 0 else 0.0
     return out

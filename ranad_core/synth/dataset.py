@@ -43,6 +43,8 @@ class SynthConfig:
     bin_gap: float = Z_GAP_REL        # deep-Z split rule's relative depth gap (binning.layout_from_samples)
     sampler: str = "independent"      # noisy frames' pixel and lens samples: "independent" or "stratified" (trace)
     guides: str = "first-hit"         # albedo/normal of the first surface, or "through-specular" (trace)
+    pixel_filter: str = "box"         # "box" (a sample in its own pixel) or "gaussian" (pixel_filter.py)
+    filter_width: float = 2.0         # the Gaussian's width in pixels (its support; ignored for box)
 
 
 def scene_seed(seed: int, index: int) -> int:
@@ -84,6 +86,7 @@ def make_one(cfg: SynthConfig, index: int) -> dict:
     centre = cfg.frames // 2
     root = scene_dir(cfg, index)
     files, stats = [], {}
+    film = (cfg.pixel_filter, cfg.filter_width)
     bins_per_px = {k: [] for k in cfg.kinds}
     ref_frames = list(range(cfg.frames)) if cfg.ref_frames == "all" else [centre]
     for kind_name in cfg.kinds:
@@ -94,7 +97,7 @@ def make_one(cfg: SynthConfig, index: int) -> dict:
         layouts = []  # (kind, spp, layout): the frame's reference is traced once and binned into each
         for spp in cfg.spp:
             samples = noisy_samples(spec, frame, spp, sseed + 7919 * frame + spp, fs, cfg.sampler == "stratified",
-                                    cfg.guides == "through-specular")
+                                    cfg.guides == "through-specular", film)
             for kind_name in cfg.kinds:
                 img, lay = bin_noisy(spec, samples, spp, KINDS[kind_name], cfg.bin_gap)
                 path = os.path.join(root, kind_name, f"noisy_spp{spp}.{frame:04d}.exr")
@@ -108,7 +111,7 @@ def make_one(cfg: SynthConfig, index: int) -> dict:
             continue
         # the centre frame's seed is the one datasets made before references of every frame existed
         refs = render_reference(spec, frame, cfg.ref_spp, [lay for _, _, lay in layouts],
-                                sseed + 104729 + 15485863 * (frame - centre), fs)
+                                sseed + 104729 + 15485863 * (frame - centre), fs, film)
         for (kind_name, spp, _), (img, lost) in zip(layouts, refs):
             path = os.path.join(root, kind_name, f"reference_spp{spp}.{frame:04d}.exr")
             write_deep(path, img)
@@ -122,6 +125,7 @@ def make_one(cfg: SynthConfig, index: int) -> dict:
                 "ref_spp": cfg.ref_spp, **({"bin_gap": cfg.bin_gap} if cfg.bin_gap != Z_GAP_REL else {}),
                 **({"sampler": cfg.sampler} if cfg.sampler != "independent" else {}),
                 **({"guides": cfg.guides} if cfg.guides != "first-hit" else {}),
+                **({"pixel_filter": [cfg.pixel_filter, cfg.filter_width]} if cfg.pixel_filter != "box" else {}),
                 "light_groups": spec.light_groups, "objects": len(spec.objects), "files": files, "stats": stats,
                 "seconds": round(time.perf_counter() - t0, 2)}
     with atomic_output(os.path.join(root, "manifest.json")) as tmp:

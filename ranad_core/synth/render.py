@@ -16,6 +16,7 @@ import numpy as np
 
 from ..deep import DeepImage
 from .binning import Z_GAP_REL, BinLayout, accumulate, assign_to_layout, bin_values, layout_from_samples
+from .pixel_filter import splat, taps
 from .scene import SceneSpec, look_at
 from .trace import REFERENCE_FIELDS, load_frame, trace
 
@@ -103,18 +104,19 @@ def deep_image(spec: SceneSpec, lay: BinLayout, vals: dict, with_motion: bool) -
 
 
 def noisy_samples(spec: SceneSpec, frame: int, spp: int, seed: int, fs=None, stratified: bool = False,
-                  through_specular: bool = False) -> dict:
-    """One noisy frame's samples with their motion vectors (binned by bin_noisy, once per deep kind)."""
+                  through_specular: bool = False, pixel_filter: tuple = ("box", 1.0)) -> dict:
+    """One noisy frame's samples with their motion vectors (binned by bin_noisy, once per deep kind), splatted
+    by `pixel_filter` (name, width in pixels; pixel_filter.py)."""
     s = trace_all(fs or load_frame(spec, frame), spp, seed, stratified, through_specular)
     add_motion(spec, frame, s)
-    return s
+    return splat(s, spec.width, spec.height, *pixel_filter)
 
 
 def bin_noisy(spec: SceneSpec, s: dict, spp: int, kind: str, gap_rel: float = Z_GAP_REL):
     """(DeepImage, layout) of noisy samples as a deep-Z ("z") or deep-OID ("oid") image (`gap_rel`: the deep-Z
     split rule, binning.layout_from_samples)."""
     lay, sample_bin = layout_from_samples(s, spec.width, spec.height, kind, gap_rel)
-    vals = bin_values(accumulate(s, sample_bin, len(lay.pixel)), lay, spp)
+    vals = bin_values(accumulate(s, sample_bin, len(lay.pixel), npixels=spec.width * spec.height), lay, spp)
     return deep_image(spec, lay, vals, True), lay
 
 
@@ -125,15 +127,19 @@ def render_noisy(spec: SceneSpec, frame: int, spp: int, kind: str, seed: int, fs
     return img, lay, s
 
 
-def render_reference(spec: SceneSpec, frame: int, ref_spp: int, layouts: list, seed: int, fs=None):
-    """References of one frame binned into each of `layouts` (one tracing pass): [(DeepImage, unbinned share)]."""
+def render_reference(spec: SceneSpec, frame: int, ref_spp: int, layouts: list, seed: int, fs=None,
+                     pixel_filter: tuple = ("box", 1.0)):
+    """References of one frame binned into each of `layouts` (one tracing pass): [(DeepImage, unbinned share)].
+    `pixel_filter` as for the noisy frames (the reference is what the same film makes of many samples)."""
     fs = fs or load_frame(spec, frame)
     n = spec.width * spec.height * ref_spp
+    chunk = max(1, CHUNK // taps(pixel_filter[1]) ** 2) if pixel_filter[0] != "box" else CHUNK
     accs = [None] * len(layouts)
-    for start in range(0, n, CHUNK):
-        s = trace(fs, ref_spp, seed, start, min(CHUNK, n - start), fields=REFERENCE_FIELDS)
+    for start in range(0, n, chunk):
+        s = trace(fs, ref_spp, seed, start, min(chunk, n - start), fields=REFERENCE_FIELDS)
+        s = splat(s, spec.width, spec.height, *pixel_filter)
         for i, lay in enumerate(layouts):
-            accs[i] = accumulate(s, assign_to_layout(s, lay), len(lay.pixel), accs[i])
+            accs[i] = accumulate(s, assign_to_layout(s, lay), len(lay.pixel), accs[i], spec.width * spec.height)
     out = []
     for lay, acc in zip(layouts, accs):
         vals = bin_values(acc, lay, ref_spp)
