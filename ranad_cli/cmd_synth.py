@@ -11,6 +11,7 @@ from ranad_core.errors import RanadError
 from ranad_core.synth.scene import FAMILIES
 
 from .params import int_list as _int_list
+from .params import width_range
 
 
 @click.command("synth")
@@ -50,8 +51,9 @@ from .params import int_list as _int_list
               help="Film filter of noisy frames and references: box (each sample in its own pixel) or gaussian "
                    "(each sample weighted into every pixel within --filter-width, as most renderers' default "
                    "filters do: noise correlated between neighbours, edge pixels with their neighbours' bins).")
-@click.option("--filter-width", default=2.0, show_default=True, type=click.FloatRange(1.0, 6.0),
-              help="The Gaussian's width in pixels (Arnold's and RenderMan's default: 2).")
+@click.option("--filter-width", default="2", show_default=True, callback=lambda _c, _p, v: width_range(v),
+              help="The Gaussian's width in pixels (Arnold's and RenderMan's default: 2), or a range A:B that each "
+                   "scene draws its width from (training data for files of many renderers).")
 def synth_cmd(out, scenes, size, frames, spp, ref_spp, seed, presets, kinds, workers, ref_frames, motion, bin_gap,
               sampler, guides, pixel_filter, filter_width):
     """Render SCENES procedural animated scenes: every frame at each noisy spp, and the centre frame's

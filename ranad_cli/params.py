@@ -16,6 +16,18 @@ def int_list(text: str) -> tuple:
     return vals
 
 
+def width_range(text: str) -> tuple:
+    """'2' -> (2.0, 2.0); '1.5:3' -> (1.5, 3.0): a filter width, or a range drawn from per scene, in [1, 6]."""
+    parts = text.split(":")
+    try:
+        lo, hi = (float(parts[0]), float(parts[-1])) if len(parts) <= 2 else (None, None)
+    except ValueError:
+        lo = hi = None
+    if lo is None or not 1.0 <= lo <= hi <= 6.0:
+        raise click.BadParameter(f"expected a width W or a range A:B within 1..6 pixels, got {text!r}")
+    return lo, hi
+
+
 def device_option(what: str, note: str = ""):
     """The `--device auto|cpu|cuda` option of the commands that run the model (ranad_core.device.resolve)."""
     return click.option("--device", type=click.Choice(["auto", "cpu", "cuda"]), default="auto", show_default=True,

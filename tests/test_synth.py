@@ -308,7 +308,7 @@ def test_gaussian_pixel_filter_renders_the_same_samples_through_a_film(tmp_path)
     np.testing.assert_allclose(flat, film / wsum[:, None], atol=5e-3, rtol=5e-3)   # half-float channels
 
     cfg = dataset.SynthConfig(out=str(tmp_path / "g"), scenes=1, size=20, frames=1, spp=(4,), ref_spp=32, seed=5,
-                              presets=("medium",), pixel_filter="gaussian", filter_width=2.0)
+                              presets=("medium",), pixel_filter="gaussian", filter_width=(2.0, 2.0))
     (m,) = dataset.run(cfg)
     assert m["pixel_filter"] == ["gaussian", 2.0]
     assert json.loads((tmp_path / "g" / "scene_0000" / "manifest.json").read_text())["pixel_filter"][0] == "gaussian"
@@ -317,3 +317,25 @@ def test_gaussian_pixel_filter_renders_the_same_samples_through_a_film(tmp_path)
         noisy = read_deep(os.path.join(cfg.out, "scene_0000", kind, "noisy_spp4.0000.exr"))
         ref = read_deep(os.path.join(cfg.out, "scene_0000", kind, "reference_spp4.0000.exr"))
         np.testing.assert_array_equal(noisy.offsets, ref.offsets)
+
+
+def test_cli_synth_draws_a_filter_width_per_scene(tmp_path):
+    """`--filter-width A:B`: each scene its own width within the range, recorded in its manifest; bad widths are
+    refused before anything is rendered."""
+    import json
+
+    from click.testing import CliRunner
+
+    from ranad_cli.main import cli
+
+    out = tmp_path / "ds"
+    base = ["synth", "-o", str(out), "--scenes", "3", "--size", "12", "--frames", "1", "--spp", "2", "--ref-spp",
+            "4", "--preset", "easy", "--kind", "deepoid", "--workers", "1", "--pixel-filter", "gaussian"]
+    r = CliRunner().invoke(cli, base + ["--filter-width", "1.5:3.5"])
+    assert r.exit_code == 0, r.output
+    widths = [json.loads((out / f"scene_{i:04d}" / "manifest.json").read_text())["pixel_filter"] for i in range(3)]
+    assert all(f == "gaussian" and 1.5 <= w <= 3.5 for f, w in widths) and len({w for _, w in widths}) == 3
+    for bad in ("0.5", "3:2", "a:b", "1:2:3", "7"):
+        r = CliRunner().invoke(cli, base[:2] + [str(tmp_path / "bad")] + base[3:] + ["--filter-width", bad])
+        assert r.exit_code == 2 and "filter-width" in r.output, (bad, r.output)
+        assert not (tmp_path / "bad").exists()

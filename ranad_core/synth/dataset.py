@@ -44,7 +44,7 @@ class SynthConfig:
     sampler: str = "independent"      # noisy frames' pixel and lens samples: "independent" or "stratified" (trace)
     guides: str = "first-hit"         # albedo/normal of the first surface, or "through-specular" (trace)
     pixel_filter: str = "box"         # "box" (a sample in its own pixel) or "gaussian" (pixel_filter.py)
-    filter_width: float = 2.0         # the Gaussian's width in pixels (its support; ignored for box)
+    filter_width: tuple = (2.0, 2.0)  # the Gaussian's width in pixels, or the range each scene draws it from
 
 
 def scene_seed(seed: int, index: int) -> int:
@@ -75,6 +75,13 @@ def _worker_init(threads: int) -> None:
     torch.set_num_threads(threads)
 
 
+def filter_width(cfg: SynthConfig, sseed: int) -> float:
+    """The scene's filter width: fixed, or drawn from cfg.filter_width's range by a stream of its own (the scene's
+    other draws stay as they were)."""
+    lo, hi = cfg.filter_width
+    return lo if hi <= lo else round(float(np.random.default_rng([sseed, 0xF11]).uniform(lo, hi)), 3)
+
+
 def make_one(cfg: SynthConfig, index: int) -> dict:
     """Renders and writes one scene; returns its manifest."""
     from .render import bin_noisy, noisy_samples, render_reference
@@ -86,7 +93,7 @@ def make_one(cfg: SynthConfig, index: int) -> dict:
     centre = cfg.frames // 2
     root = scene_dir(cfg, index)
     files, stats = [], {}
-    film = (cfg.pixel_filter, cfg.filter_width)
+    film = (cfg.pixel_filter, filter_width(cfg, sseed))
     bins_per_px = {k: [] for k in cfg.kinds}
     ref_frames = list(range(cfg.frames)) if cfg.ref_frames == "all" else [centre]
     for kind_name in cfg.kinds:
@@ -125,7 +132,7 @@ def make_one(cfg: SynthConfig, index: int) -> dict:
                 "ref_spp": cfg.ref_spp, **({"bin_gap": cfg.bin_gap} if cfg.bin_gap != Z_GAP_REL else {}),
                 **({"sampler": cfg.sampler} if cfg.sampler != "independent" else {}),
                 **({"guides": cfg.guides} if cfg.guides != "first-hit" else {}),
-                **({"pixel_filter": [cfg.pixel_filter, cfg.filter_width]} if cfg.pixel_filter != "box" else {}),
+                **({"pixel_filter": list(film)} if cfg.pixel_filter != "box" else {}),
                 "light_groups": spec.light_groups, "objects": len(spec.objects), "files": files, "stats": stats,
                 "seconds": round(time.perf_counter() - t0, 2)}
     with atomic_output(os.path.join(root, "manifest.json")) as tmp:
