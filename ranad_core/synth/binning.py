@@ -73,10 +73,9 @@ def layout_from_samples(s: dict, width: int, height: int, kind: str,
     sample_bin[hit[order]] = bin_sorted
     b_pix = pix[order][key_change]
     zsorted = z[order]
-    zmin = np.full(nb, np.inf)
-    zmax = np.full(nb, -np.inf)
-    np.minimum.at(zmin, bin_sorted, zsorted)
-    np.maximum.at(zmax, bin_sorted, zsorted)
+    # both orders sort a bin's samples by depth last: its first and last sample hold its range
+    zmin = zsorted[key_change].astype(np.float64)
+    zmax = zsorted[np.append(np.flatnonzero(key_change)[1:], len(order))[:nb] - 1].astype(np.float64)
     if kind == "oid":
         b_obj = obj[order][key_change]
     else:  # majority object of each depth cluster (kept for motion checks, not written)
@@ -93,7 +92,8 @@ def layout_from_samples(s: dict, width: int, height: int, kind: str,
     ord2 = np.lexsort((zmin, b_pix))
     remap = np.empty(nb, np.int64)
     remap[ord2] = np.arange(nb)
-    sample_bin = np.where(sample_bin >= 0, remap[np.maximum(sample_bin, 0)], -1)
+    if nb:   # (without bins every sample_bin is already -1)
+        sample_bin = np.where(sample_bin >= 0, remap[np.maximum(sample_bin, 0)], -1)
     lay = BinLayout(width, height, b_pix[ord2].astype(np.int64), np.asarray(b_obj)[ord2].astype(np.uint32),
                     zmin[ord2], zmax[ord2], kind)
     return lay, sample_bin
@@ -133,9 +133,18 @@ def assign_to_layout(s: dict, lay: BinLayout) -> np.ndarray:
 
 
 def _sample_matrix(s: dict):
-    """[n, 2 + channels] float32 tensor of (1, z, every summed and mean channel), built once per sample set."""
+    """[n, 2 + channels] float32 tensor of (1, z, every summed and mean channel), built once per sample set.
+
+    A pixel filter's copies (pixel_filter.splat: `_parent`, `_src`, `weight`) gather their rows from the parent's
+    matrix and weight them, column 0 becoming the weight."""
     import torch
 
+    if "_matrix" not in s and "_parent" in s:
+        base, names, widths = _sample_matrix(s["_parent"])
+        src = torch.from_numpy(s["_src"])
+        w = torch.from_numpy(s["weight"])
+        s["_matrix"] = (base.index_select(0, src).mul_(w[:, None]), names, widths)
+        s["_total"] = s["_parent"]["_total"][s["_src"]] * s["weight"]
     if "_matrix" not in s:
         names = [n for n in SUMMED + MEANS if n in s] + ["groups"]
         widths = [int(np.prod(s[n].shape[1:])) for n in names]
@@ -147,12 +156,8 @@ def _sample_matrix(s: dict):
         for k, w in zip(names, widths):
             mat[:, c:c + w] = s[k].reshape(n, w)
             c += w
-        total = sum(s[k] for k in SUMMED).sum(axis=1).astype(np.float64)
-        if "weight" in s:  # a pixel filter's copies (pixel_filter.splat): every sum weighted, column 0 the weight
-            mat *= s["weight"][:, None]
-            total *= s["weight"]
         s["_matrix"] = (torch.from_numpy(mat), names, widths)
-        s["_total"] = total
+        s["_total"] = sum(s[k] for k in SUMMED).sum(axis=1).astype(np.float64)
     return s["_matrix"]
 
 
@@ -178,8 +183,9 @@ def accumulate(s: dict, sample_bin: np.ndarray, nbins: int, acc: dict | None = N
     sums = torch.zeros(nbins + 1, mat.shape[1], dtype=mat.dtype).index_add_(0, idx, mat)[:nbins]
     sums = sums.numpy().astype(np.float64)
     if "weight" in s:
-        acc["pixel_weight"] = acc.get("pixel_weight", 0.0) + np.bincount(s["pixel"], weights=s["weight"],
-                                                                         minlength=npixels)
+        if "_pixel_weight" not in s:   # the same for every layout the samples are binned into
+            s["_pixel_weight"] = np.bincount(s["pixel"], weights=s["weight"], minlength=npixels)
+        acc["pixel_weight"] = acc.get("pixel_weight", 0.0) + s["_pixel_weight"]
     acc["count"] += sums[:, 0]
     acc["z"] += sums[:, 1]
     c = 2

@@ -36,8 +36,11 @@ def _weights_1d(dist: np.ndarray, r: float) -> np.ndarray:
 def splat(s: dict, width_px: int, height_px: int, filt: str, filter_width: float) -> dict:
     """Samples replicated into every pixel their filter reaches, each copy with its weight in `weight`.
 
-    `s` needs `pixel` (row-major index), `sx`, `sy` (position in the pixel, [0, 1)); every other per-sample array
-    is copied with its sample. Box filtering returns `s` itself (weights are implicit 1, the existing path).
+    `s` needs `pixel` (row-major index), `sx`, `sy` (position in the pixel, [0, 1)). The copies carry what binning
+    reads per sample (`pixel`, `weight`, `hit`, `z`, `obj`) and `_src`, each copy's sample in `_parent` (= s),
+    whose channel matrix binning gathers once (copying every channel of every copy took most of a scene's time).
+    `sample(copies, name)` gives any other channel per copy. Box filtering returns `s` itself (weights implicit 1,
+    the existing path).
     """
     if filt == "box":
         return s
@@ -45,7 +48,6 @@ def splat(s: dict, width_px: int, height_px: int, filt: str, filter_width: float
         raise ValueError(f"unknown pixel filter {filt!r}")
     r = filter_width / 2
     reach = (taps(filter_width) - 1) // 2
-    n = len(s["pixel"])
     px, py = s["pixel"] % width_px, s["pixel"] // width_px
     src, pix, wts = [], [], []
     for oy in range(-reach, reach + 1):
@@ -59,8 +61,11 @@ def splat(s: dict, width_px: int, height_px: int, filt: str, filter_width: float
             pix.append(ty[keep] * width_px + tx[keep])
             wts.append(w[keep])
     order = np.concatenate(src)
-    out = {k: (v[order] if isinstance(v, np.ndarray) and v.ndim >= 1 and len(v) == n else v)
-           for k, v in s.items() if not k.startswith("_")}
-    out["pixel"] = np.concatenate(pix).astype(np.int64)
-    out["weight"] = np.concatenate(wts)
+    out = {k: s[k][order] for k in ("hit", "z", "obj") if k in s}
+    out.update(pixel=np.concatenate(pix).astype(np.int64), weight=np.concatenate(wts), _src=order, _parent=s)
     return out
+
+
+def sample(copies: dict, name: str) -> np.ndarray:
+    """Channel `name` of every sample, or of every copy of a splat's samples."""
+    return copies[name] if name in copies else copies["_parent"][name][copies["_src"]]
