@@ -1,9 +1,9 @@
 """Pixel reconstruction filters: each path sample splatted into every pixel its filter reaches, with a weight.
 
-Production renderers rarely box-filter: Arnold, RenderMan and Karma default to a Gaussian about 2 px wide and
-Mitsuba to one of radius 2, and deep drivers weight a pixel's deep samples by the same filter. A sample then
-lands, with a weight, in the bins of its neighbours too, so noise is correlated between neighbouring pixels and
-edge pixels get bins of their neighbours' surfaces. ranad's tracer box-filters (a sample belongs to one pixel);
+Production renderers rarely box-filter: Arnold's and RenderMan's default pixel filter is a Gaussian 2 px wide,
+Mitsuba's a Gaussian of radius 2. Where a renderer's deep output is filtered like its beauty, a sample lands, with a
+weight, in the bins of its neighbours too, so noise is correlated between neighbouring pixels and edge pixels get
+bins of their neighbours' surfaces. ranad's tracer box-filters (a sample belongs to one pixel);
 `ranad synth --pixel-filter gaussian` renders the same scenes and samples the other way, for held-out sets and
 training data that look like those renderers' files.
 
