@@ -8,6 +8,7 @@ import click
 from tqdm import tqdm
 
 from ranad_core.errors import RanadError
+from ranad_core.synth.pixel_filter import FILTERS
 from ranad_core.synth.scene import FAMILIES
 
 from .params import int_list as _int_list
@@ -47,7 +48,7 @@ from .params import width_range
               show_default=True,
               help="Albedo/normal guides: the first surface's own, or (through-specular) those of the first surface "
                    "behind smooth glass and mirrors, as OIDN asks and renderers' denoising AOVs write.")
-@click.option("--pixel-filter", type=click.Choice(["box", "gaussian"]), default="box", show_default=True,
+@click.option("--pixel-filter", type=click.Choice(FILTERS), default="box", show_default=True,
               help="Film filter of noisy frames and references: box (each sample in its own pixel) or gaussian "
                    "(each sample weighted into every pixel within --filter-width, as most renderers' default "
                    "filters do: noise correlated between neighbours, edge pixels with their neighbours' bins).")
