@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from ranad_core.synth.binning import accumulate, bin_values, layout_from_samples
-from ranad_core.synth.pixel_filter import splat, taps
+from ranad_core.synth.pixel_filter import copies_per_sample, splat, taps
 
 
 def _samples(rng, w, h, spp, centred=False):
@@ -102,3 +102,13 @@ def test_box_is_the_unfiltered_path_and_taps_cover_the_support():
     assert [taps(x) for x in (1.0, 2.0, 3.0, 3.2, 4.0, 6.0)] == [1, 3, 3, 5, 5, 7]
     with pytest.raises(ValueError):
         splat(s, 3, 3, "sinc", 2.0)
+
+
+@pytest.mark.parametrize("width", [1.5, 2.0, 3.0, 4.0])
+def test_copies_per_sample_bounds_the_splat(width):
+    """What render_reference sizes its chunks by: no sample is ever copied into more pixels."""
+    s = _samples(np.random.default_rng(1), 16, 16, 8)
+    out = splat(s, 16, 16, "gaussian", width)
+    per_sample = np.bincount(out["_src"], minlength=len(s["pixel"]))
+    assert per_sample.max() <= copies_per_sample("gaussian", width)
+    assert per_sample.min() >= 1 and copies_per_sample("box", width) == 1

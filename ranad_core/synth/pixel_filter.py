@@ -28,6 +28,11 @@ def taps(width: float) -> int:
     return 2 * math.ceil(r - 0.5) + 1 if r > 0.5 else 1
 
 
+def copies_per_sample(filt: str, width: float) -> int:
+    """At most how many pixels one sample is splatted into (what a caller sizes its sample chunks by)."""
+    return 1 if filt == "box" else taps(width) ** 2
+
+
 def _weights_1d(dist: np.ndarray, r: float) -> np.ndarray:
     w = np.exp(-ALPHA * (dist / r) ** 2) - math.exp(-ALPHA)
     return np.where(np.abs(dist) < r, np.maximum(w, 0.0), 0.0).astype(np.float32)

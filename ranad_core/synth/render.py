@@ -16,7 +16,7 @@ import numpy as np
 
 from ..deep import DeepImage
 from .binning import Z_GAP_REL, BinLayout, accumulate, assign_to_layout, bin_values, layout_from_samples
-from .pixel_filter import splat, taps
+from .pixel_filter import copies_per_sample, splat
 from .scene import SceneSpec, look_at
 from .trace import REFERENCE_FIELDS, load_frame, trace
 
@@ -133,7 +133,7 @@ def render_reference(spec: SceneSpec, frame: int, ref_spp: int, layouts: list, s
     `pixel_filter` as for the noisy frames (the reference is what the same film makes of many samples)."""
     fs = fs or load_frame(spec, frame)
     n = spec.width * spec.height * ref_spp
-    chunk = max(1, CHUNK // taps(pixel_filter[1]) ** 2) if pixel_filter[0] != "box" else CHUNK
+    chunk = max(1, CHUNK // copies_per_sample(*pixel_filter))
     accs = [None] * len(layouts)
     for start in range(0, n, chunk):
         s = trace(fs, ref_spp, seed, start, min(chunk, n - start), fields=REFERENCE_FIELDS)
