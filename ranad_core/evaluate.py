@@ -192,8 +192,26 @@ def ratios(rows: list) -> list:
     return out
 
 
+def family_ratios(rows: list) -> list:
+    """Per (family, spp), means over its scenes, kinds and exposures: OIDN's flat FLIP / the noisy input's (how much
+    a flat denoiser helps on that family: below 1 it helps, above it loses detail the noise left), ranad's / OIDN's
+    and ranad's edit FLIP / OIDN+recolour's. A set's overall ratio can hide a family where OIDN already does well
+    and ranad's lead is small (a user's renders may all be of that kind)."""
+    out = []
+    for fam in sorted({r.get("family", "?") for r in rows}):
+        sel = [r for r in rows if r.get("family", "?") == fam]
+        by = {(r["spp"], r["method"]): r for r in summary(sel)}
+        for spp in sorted({r["spp"] for r in sel}):
+            if all((spp, m) in by for m in ("noisy", "oidn", "recolour", "ranad")):
+                out.append({"family": fam, "spp": spp, "n": by[(spp, "ranad")]["n"],
+                            "oidn_vs_noisy": by[(spp, "oidn")]["flip"] / by[(spp, "noisy")]["flip"],
+                            "flip_vs_oidn": by[(spp, "ranad")]["flip"] / by[(spp, "oidn")]["flip"],
+                            "edit_vs_recolour": by[(spp, "ranad")]["comp_flip"] / by[(spp, "recolour")]["comp_flip"]})
+    return out
+
+
 def grouped_markdown(rows: list, title: str = "") -> str:
-    """One summary table per (group, exposure, kind), then the ratio table."""
+    """One summary table per (group, exposure, kind), then the ratio tables: per group, and per family."""
     parts = [f"## {title}", ""] if title else []
     for g, e, kind in groups(rows):
         sel = [r for r in rows if (r.get("group", "in-family"), r.get("exposure", 0), r["kind"]) == (g, e, kind)]
@@ -206,6 +224,12 @@ def grouped_markdown(rows: list, title: str = "") -> str:
         parts += ["### ranad / baseline (flat FLIP vs OIDN, edit FLIP vs OIDN+recolour; < 1: ranad better)", "",
                   "| " + " | ".join(cols) + " |", "|" + "---|" * len(cols)]
         parts += ["| " + " | ".join(_fmt(r[c]) for c in cols) + " |" for r in rt]
+    fr = family_ratios(rows)
+    if fr:
+        cols = ("family", "spp", "n", "oidn_vs_noisy", "flip_vs_oidn", "edit_vs_recolour")
+        parts += ["", "### per family (means over kinds and exposures; oidn_vs_noisy: flat OIDN's FLIP / the noisy "
+                  "input's)", "", "| " + " | ".join(cols) + " |", "|" + "---|" * len(cols)]
+        parts += ["| " + " | ".join(_fmt(r[c]) for c in cols) + " |" for r in fr]
     return "\n".join(parts) + "\n"
 
 

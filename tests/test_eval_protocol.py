@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from ranad_core.deep import DeepImage
-from ranad_core.evaluate import exposed, grouped_markdown, radiance_channels, ratios
+from ranad_core.evaluate import exposed, family_ratios, grouped_markdown, radiance_channels, ratios
 
 
 def test_exposure_scales_radiance_only():
@@ -45,3 +45,18 @@ def test_ratios_per_group():
     text = grouped_markdown(_rows(), "t")
     assert text.index("held-out (glass)") < text.index("in-family (easy)")
     assert "| held-out | +0 | deepz | 16 | 2 | 0.8000 | 0.5000 |" in text
+
+
+def test_ratios_per_family():
+    """The per-family table divides each family's own means: OIDN's flat FLIP is half the noisy input's in both
+    families, ranad's 0.8x / 0.5x OIDN's, its edit half of recolour's."""
+    rows = _rows()
+    rows += [{**r, "scene": "c", "exposure": 2} for r in rows[:4]]   # glass at another exposure
+    fr = {(r["family"], r["spp"]): r for r in family_ratios(_rows())}
+    assert fr[("glass", 16)]["oidn_vs_noisy"] == pytest.approx(0.5)
+    assert fr[("glass", 16)]["flip_vs_oidn"] == pytest.approx(0.8)
+    assert fr[("easy", 16)]["flip_vs_oidn"] == pytest.approx(0.5)
+    assert fr[("easy", 16)]["edit_vs_recolour"] == pytest.approx(0.5)
+    assert {r["n"] for r in family_ratios(rows) if r["family"] == "glass"} == {3}
+    text = grouped_markdown(_rows(), "t")
+    assert "| glass | 16 | 2 | 0.5000 | 0.8000 | 0.5000 |" in text
