@@ -185,7 +185,7 @@ def test_cli_synth_rejects_bad_sample_counts(tmp_path):
     assert not (tmp_path / "x").exists()
 
 
-@pytest.mark.parametrize("family", ["studio", "glass", "thin", "layers", "textured"])
+@pytest.mark.parametrize("family", ["studio", "glass", "thin", "layers", "textured", "interior"])
 def test_scene_families_draw_their_axes(family):
     """Each family draws the axes it names (over several seeds): glass objects, fences, layer stacks, small
     intense lights, textures; and the original presets never draw them."""
@@ -215,6 +215,15 @@ def test_scene_families_draw_their_axes(family):
         assert small and {"conductor", "plastic"} & types
     if family == "textured":
         assert "checkerboard" in types
+    if family == "interior":   # walls behind and beside the objects, every light inside the room
+        from ranad_core.synth.scene import WALL
+
+        for spec in specs:
+            centres = [np.asarray(o.transforms[0])[:3, 3] for o in spec.objects if o.kind == "rectangle"]
+            assert any(np.allclose(c, [0, 0, -WALL]) for c in centres)
+            assert any(np.allclose(c, [-WALL, 0, 0]) for c in centres)
+            lights = [np.asarray(o.transforms[0])[:3, 3] for o in spec.objects if o.radiance is not None]
+            assert lights and all(abs(c[0]) < WALL and c[2] > -WALL for c in lights)
     for preset in ("easy", "medium", "deep-heavy"):
         old = set().union(*(bsdf_types(make_scene(s, preset, 32, 1)) for s in range(6)))
         assert not old & {"dielectric", "thindielectric", "checkerboard", "conductor", "plastic"}

@@ -187,6 +187,10 @@ FAMILY_PARAMS = {
     # textured albedo at many frequencies, many mid-size objects, wide and long lenses
     "textured": {**_NEW, "objects": (5, 9), "thin": (0, 2), "cards": (0, 3), "fov": (15, 70), "dof": 0.5,
                  "materials": dict(textured=5, diffuse=1, roughplastic=1, roughconductor=1)},
+    # a room corner lit mostly by bounce light: walls behind and beside the objects, lights aimed at the walls,
+    # matte and low-frequency textured materials (indirect, low-frequency noise: what flat denoisers handle best)
+    "interior": {**_NEW, "objects": (4, 8), "thin": (0, 1), "walls": True, "bounce": 0.7,
+                 "materials": dict(diffuse=4, textured=3, roughplastic=1, roughconductor=1), "tex_freq": (1, 8)},
 }
 PRESET_PARAMS.update(FAMILY_PARAMS)
 PRESETS = ("easy", "medium", "deep-heavy")           # the original presets, used in turn by default
@@ -278,7 +282,13 @@ def make_scene(seed: int, preset: str = "medium", size: int = 128, frames: int =
     for g, _name in enumerate(spec.light_groups):
         for _ in range(1 if g else int(rng.integers(1, 3))):
             pos = [rng.uniform(-4, 4), rng.uniform(3.0, 5.0), rng.uniform(-3, 4)]
-            base = look_at(pos, [0, 0.5, 0]) @ scale(rng.uniform(0.3, 0.8))
+            aim = [0, 0.5, 0]
+            if p.get("walls"):   # inside the room
+                pos = [min(max(pos[0], 0.3 - WALL), WALL - 0.3), pos[1], max(pos[2], 0.3 - WALL)]
+            if p.get("bounce") and rng.random() < p["bounce"]:   # at the back or left wall: bounce light
+                aim = [rng.uniform(-3, 3), rng.uniform(1, 4), -WALL] if rng.random() < 0.6 else \
+                    [-WALL, rng.uniform(1, 4), rng.uniform(-3, 3)]
+            base = look_at(pos, aim) @ scale(rng.uniform(0.3, 0.8))
             power = rng.uniform(4, 14) if g == 0 else rng.uniform(1.5, 6)
             col = np.clip(rng.normal(1.0, 0.15, 3), 0.6, 1.4) * power
             add("rectangle", {"type": "diffuse"}, base, vel=np.zeros(3),
@@ -298,8 +308,12 @@ def make_scene(seed: int, preset: str = "medium", size: int = 128, frames: int =
     return spec
 
 
+WALL = 3.5   # the interior family's walls: the back wall at z = -WALL, the side walls at x = -+WALL
+
+
 def _family_extras(spec: SceneSpec, p: dict, rng: np.random.Generator, add, cam_o, cam_t, m: float) -> None:
-    """The geometry axes only families draw: fences, stacks of semi-transparent layers, thin glass sheets."""
+    """The geometry axes only families draw: fences, stacks of semi-transparent layers, thin glass sheets, walls
+    (families without walls draw nothing for them, so their scenes are as before)."""
     for _ in range(int(rng.integers(*p["fences"], endpoint=True))):  # fences: a grid of bars cut out of a card
         pos = [rng.uniform(-2.0, 2.0), rng.uniform(0.4, 1.0), rng.uniform(-1.0, 3.0)]
         base = translate(pos) @ rotate([0, 1, 0], rng.uniform(-60, 60)) @ scale([rng.uniform(0.6, 1.6),
@@ -322,6 +336,12 @@ def _family_extras(spec: SceneSpec, p: dict, rng: np.random.Generator, add, cam_
         base = look_at(pos, cam_o) @ rotate([0, 1, 0], rng.uniform(-30, 30)) @ \
             scale([rng.uniform(0.3, 0.8), rng.uniform(0.3, 0.7), 1])
         add("rectangle", {"type": "thindielectric", "int_ior": float(rng.uniform(1.3, 1.6))}, base)
+    if p.get("walls"):   # static walls: back, left, and the right one in half the scenes
+        walls = [translate([0, 0, -WALL]) @ scale(8), translate([-WALL, 0, 0]) @ rotate([0, 1, 0], 90) @ scale(8)]
+        if rng.random() < 0.5:
+            walls.append(translate([WALL, 0, 0]) @ rotate([0, 1, 0], -90) @ scale(8))
+        for base in walls:
+            add("rectangle", _material(rng, dict(diffuse=2, textured=1), (1, 4)), base, vel=np.zeros(3))
 
 
 def mitsuba_dict(spec: SceneSpec, frame: int) -> dict:
