@@ -112,3 +112,25 @@ def test_copies_per_sample_bounds_the_splat(width):
     per_sample = np.bincount(out["_src"], minlength=len(s["pixel"]))
     assert per_sample.max() <= copies_per_sample("gaussian", width)
     assert per_sample.min() >= 1 and copies_per_sample("box", width) == 1
+
+
+def test_a_sliver_behind_a_nearly_opaque_front_keeps_a_finite_colour():
+    """Filtered counts are summed in float32 and the pixel's weight in float64, so the bins of a pixel can cover a
+    hair more than its weight. A sliver bin (coverage 3.6e-7) behind a front that then leaves it less room than its
+    own share gets alpha 1 and its samples' mean radiance, not that radiance times share / room, which overflowed
+    the files' half floats (inf in about 1% of stratified, filtered training files)."""
+    from ranad_core.synth.binning import BinLayout, bin_values
+
+    count = np.array([1.0 - 2e-7, 3.6e-7])          # sums to 1 + 1.6e-7 of a pixel weight of 1
+    radiance = np.array([[1.0, 1.0, 1.0], [5e4, 5e4, 5e4]])   # the sliver: one bright sample's copy
+    lay = BinLayout(width=1, height=1, pixel=np.zeros(2, np.int64), obj=np.array([1, 2], np.uint32),
+                    zmin=np.array([1.0, 2.0]), zmax=np.array([1.0, 2.0]), kind="z")
+    acc = {"count": count, "pixel_weight": np.array([1.0]), "z": count * [1.0, 2.0], "unbinned": 0.0,
+           "total": 1.0, "groups": radiance[:, :1] * count[:, None]}
+    for name in ("diffuse", "specular", "emission"):
+        acc[name] = radiance * count[:, None] if name == "diffuse" else np.zeros((2, 3))
+    vals = bin_values(acc, lay, 16)
+    assert vals["A"][1] == 1.0
+    np.testing.assert_allclose(vals["diffuse"][1], 5e4, rtol=1e-6)    # the mean, within half's range
+    np.testing.assert_allclose(vals["diffuse"][0], 1.0, rtol=1e-6)     # the front bin as before
+    assert np.all(np.abs(vals["diffuse"]) < 65504)

@@ -211,7 +211,10 @@ def bin_values(acc: dict, lay: BinLayout, spp: int) -> dict:
     # coverage of the bins in front of each bin, within its pixel
     before = np.cumsum(cov) - cov
     before -= np.repeat(np.append(before, 0.0)[offs[:-1]], np.diff(offs))
-    room = np.maximum(1.0 - before, 1e-12)
+    # what the bins in front leave; never less than the bin's own share: filtered counts are summed in float32 and
+    # the pixel's weight in float64, so behind a nearly opaque front a bin of a few 1e-7 could find less room than
+    # its own coverage, and dividing by the clamp made its colour overflow the file's half floats (inf)
+    room = np.maximum(np.maximum(1.0 - before, cov), 1e-12)
     safe = np.where(count > 0, count, 1.0)[:, None]   # weighted counts of filtered samples can be below 1
     out = {"coverage": cov, "A": np.clip(cov / room, 0.0, 1.0)}
     for name in SUMMED + ("groups",):
