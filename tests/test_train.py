@@ -589,3 +589,37 @@ def test_spp_weights_from_the_command_line(tmp_path):
         r = CliRunner().invoke(cli, ["train", str(ds), "-o", str(tmp_path / "r2"), "--spp-weight", bad])
         assert r.exit_code == 2 and "--spp-weight" in r.output and "SPP=W" in r.output
     assert not (tmp_path / "r2").exists()
+
+
+def _poison_reference(scene: Path, rows: slice) -> None:
+    """The scene's reference with +inf in diffuse.R of `rows` (what a broken render leaves)."""
+    from ranad_core.exr import write_deep
+
+    path = scene / "deepoid" / "reference_spp16.0001.exr"
+    img = read_deep(path)
+    vals = img.values.copy()
+    vals[rows, img.channels.index("diffuse.R")] = np.inf
+    write_deep(path, img.with_values(vals))
+
+
+def test_training_skips_draws_with_a_non_finite_loss(tmp_path):
+    """A pair whose reference holds infinities makes some draws' loss non-finite: those are skipped (logged), the
+    weights stay finite and the run reaches its steps; a dataset where every draw is non-finite stops with an
+    error instead of spinning."""
+    ds = tmp_path / "ds"
+    dataset_from_example(ds)
+    shutil.copytree(ds / "scene_0000", ds / "scene_0001")
+    _poison_reference(ds / "scene_0001", slice(None))
+    run = tmp_path / "run"
+    r = CliRunner().invoke(cli, ["train", str(ds), "-o", str(run), "--steps", "8", "--crop", "16",
+                                 "--checkpoint-every", "100", "--seed", "3"])
+    assert r.exit_code == 0, r.output
+    state = torch.load(run / "checkpoint.pt", weights_only=False)
+    assert state["step"] == 8
+    assert all(torch.isfinite(v).all() for v in state["model"].values() if v.is_floating_point())
+    assert "non-finite draws skipped" in (run / "train.log").read_text()
+    bad = tmp_path / "bad"
+    dataset_from_example(bad)
+    _poison_reference(bad / "scene_0000", slice(None))
+    r = CliRunner().invoke(cli, ["train", str(bad), "-o", str(tmp_path / "run2"), "--steps", "4", "--crop", "16"])
+    assert r.exit_code == 2 and "not finite on 50 draws in a row" in r.output

@@ -312,6 +312,18 @@ def consecutive_pairs(cfg: TrainConfig, cross: bool, world: int) -> list:
     return found
 
 
+MAX_NONFINITE_RUN = 50   # draws in a row with a non-finite loss before training stops with an error
+
+
+def _all_finite(loss: torch.Tensor, world: int) -> bool:
+    """Whether the loss is finite on every rank (all skip the step together, or DDP's gradient averaging in
+    backward would wait for a rank that skipped)."""
+    ok = torch.isfinite(loss.detach()).all().float().reshape(1).cpu()
+    if world > 1:
+        torch.distributed.all_reduce(ok, op=torch.distributed.ReduceOp.MIN)
+    return bool(ok.item() > 0)
+
+
 def train(cfg: TrainConfig, progress=None) -> dict:
     """Trains (or resumes) into cfg.run; returns the last step's loss parts. Joins the process group when
     torch.distributed is initialised (see `spawn_local`, or torchrun's environment)."""
@@ -351,6 +363,7 @@ def train(cfg: TrainConfig, progress=None) -> dict:
     net = torch.nn.parallel.DistributedDataParallel(model, find_unused_parameters=True) if world > 1 else model
     log = open(os.path.join(cfg.run, "train.log"), "a") if rank == 0 else None
     parts = {}
+    nonfinite = bad_run = 0   # draws skipped for a non-finite loss or gradient: in all, and in a row
     t0 = time.perf_counter()
     last = min(cfg.steps, cfg.until or cfg.steps)
     while step < last:
@@ -366,15 +379,27 @@ def train(cfg: TrainConfig, progress=None) -> dict:
         if not loss.requires_grad:  # frozen spatial part, window without neighbours: nothing here trains
             continue
         opt.zero_grad()
+        if not _all_finite(loss, world):   # one bad crop must not turn every weight into NaN
+            nonfinite += 1
+            bad_run += 1
+            if bad_run >= MAX_NONFINITE_RUN:
+                raise RanadError(f"the loss was not finite on {bad_run} draws in a row (non-finite values in the "
+                                 "dataset's files?)", cfg.run)
+            continue
         loss.backward()
-        torch.nn.utils.clip_grad_norm_(model.parameters(), cfg.clip)
+        norm = torch.nn.utils.clip_grad_norm_(model.parameters(), cfg.clip)
+        if not torch.isfinite(norm):   # the same on every rank: DDP has averaged the gradients
+            nonfinite += 1
+            continue
+        bad_run = 0
         opt.step()
         step += 1
         if log and (step % cfg.log_every == 0 or step == last):
             secs = (time.perf_counter() - t0) / cfg.log_every
             t0 = time.perf_counter()
             line = (f"step {step} loss {loss.item():.4f} " + " ".join(f"{k} {v:.4f}" for k, v in parts.items())
-                    + f" lr {learning_rate(cfg, step - 1):.2e} {secs:.2f} s/step")
+                    + f" lr {learning_rate(cfg, step - 1):.2e} {secs:.2f} s/step"
+                    + (f" ({nonfinite} non-finite draws skipped so far)" if nonfinite else ""))
             print(line, file=log, flush=True)
         if rank == 0 and (step % cfg.checkpoint_every == 0 or step == last):
             save_checkpoint(ckpt, model, opt, step, cfg, rng)
