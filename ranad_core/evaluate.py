@@ -176,19 +176,32 @@ def groups(rows: list) -> list:
     return sorted(keys, key=lambda k: (order.get(k[0], 2), k[1], k[2]))
 
 
+def _spp_ratios(sel: list, noisy: bool = False) -> list:
+    """Per spp of `sel`, means over its rows taken first: n, ranad's flat FLIP / OIDN's and its edit FLIP /
+    OIDN+recolour's, with `noisy` also OIDN's flat FLIP / the noisy input's; an spp lacking a method is left out."""
+    by = {(r["spp"], r["method"]): r for r in summary(sel)}
+    needs = ("noisy", "oidn", "recolour", "ranad") if noisy else ("ranad", "oidn")
+    out = []
+    for spp in sorted({r["spp"] for r in sel}):
+        if not all((spp, m) in by for m in needs):
+            continue
+        ranad, oidn = by[(spp, "ranad")], by[(spp, "oidn")]
+        row = {"spp": spp, "n": ranad["n"]}
+        if noisy:
+            row["oidn_vs_noisy"] = oidn["flip"] / by[(spp, "noisy")]["flip"]
+        row["flip_vs_oidn"] = ranad["flip"] / oidn["flip"]
+        row["edit_vs_recolour"] = ranad["comp_flip"] / by[(spp, "recolour")]["comp_flip"]
+        out.append(row)
+    return out
+
+
 def ratios(rows: list) -> list:
     """Per (group, exposure, kind, spp): ranad's flat FLIP / OIDN's and its edit FLIP / OIDN+recolour's (the
     issue's targets), means over scenes taken first."""
     out = []
     for g, e, kind in groups(rows):
         sel = [r for r in rows if (r.get("group", "in-family"), r.get("exposure", 0), r["kind"]) == (g, e, kind)]
-        by = {(r["spp"], r["method"]): r for r in summary(sel)}
-        for spp in sorted({r["spp"] for r in sel}):
-            if (spp, "ranad") in by and (spp, "oidn") in by:
-                out.append({"group": g, "exposure": f"{e:+g}", "kind": kind, "spp": spp,
-                            "n": by[(spp, "ranad")]["n"],
-                            "flip_vs_oidn": by[(spp, "ranad")]["flip"] / by[(spp, "oidn")]["flip"],
-                            "edit_vs_recolour": by[(spp, "ranad")]["comp_flip"] / by[(spp, "recolour")]["comp_flip"]})
+        out += [{"group": g, "exposure": f"{e:+g}", "kind": kind, **r} for r in _spp_ratios(sel)]
     return out
 
 
@@ -200,13 +213,7 @@ def family_ratios(rows: list) -> list:
     out = []
     for fam in sorted({r.get("family", "?") for r in rows}):
         sel = [r for r in rows if r.get("family", "?") == fam]
-        by = {(r["spp"], r["method"]): r for r in summary(sel)}
-        for spp in sorted({r["spp"] for r in sel}):
-            if all((spp, m) in by for m in ("noisy", "oidn", "recolour", "ranad")):
-                out.append({"family": fam, "spp": spp, "n": by[(spp, "ranad")]["n"],
-                            "oidn_vs_noisy": by[(spp, "oidn")]["flip"] / by[(spp, "noisy")]["flip"],
-                            "flip_vs_oidn": by[(spp, "ranad")]["flip"] / by[(spp, "oidn")]["flip"],
-                            "edit_vs_recolour": by[(spp, "ranad")]["comp_flip"] / by[(spp, "recolour")]["comp_flip"]})
+        out += [{"family": fam, **r} for r in _spp_ratios(sel, noisy=True)]
     return out
 
 
