@@ -11,7 +11,7 @@ import math
 import numpy as np
 import pytest
 
-from ranad_core.synth.binning import accumulate, bin_values, layout_from_samples
+from ranad_core.synth.binning import BinLayout, accumulate, bin_values, layout_from_samples
 from ranad_core.synth.pixel_filter import copies_per_sample, splat, taps
 
 
@@ -119,8 +119,6 @@ def test_a_sliver_behind_a_nearly_opaque_front_keeps_a_finite_colour():
     hair more than its weight. A sliver bin (coverage 3.6e-7) behind a front that then leaves it less room than its
     own share gets alpha 1 and its samples' mean radiance, not that radiance times share / room, which overflowed
     the files' half floats (inf in about 1% of stratified, filtered training files)."""
-    from ranad_core.synth.binning import BinLayout, bin_values
-
     count = np.array([1.0 - 2e-7, 3.6e-7])          # sums to 1 + 1.6e-7 of a pixel weight of 1
     radiance = np.array([[1.0, 1.0, 1.0], [5e4, 5e4, 5e4]])   # the sliver: one bright sample's copy
     lay = BinLayout(width=1, height=1, pixel=np.zeros(2, np.int64), obj=np.array([1, 2], np.uint32),
