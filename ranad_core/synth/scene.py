@@ -47,9 +47,74 @@ class SceneSpec:
     camera: Camera
     objects: list = field(default_factory=list)
     light_groups: list = field(default_factory=list)
+    sky: "Sky | None" = None      # an environment light (families with `sky`), else none
+
 
     def object(self, oid: int) -> SceneObject:
         return next(o for o in self.objects if o.id == oid)
+
+
+@dataclass
+class Sky:
+    """An environment light: a sky gradient from the horizon to the zenith, a dim ground below the horizon and
+    (unless overcast) a sun disc. Paths that leave the scene after a bounce see it; camera rays that miss
+    everything stay empty, as deep renders hold no sky bins."""
+    zenith: tuple                # RGB radiance straight up
+    horizon: tuple               # RGB radiance at the horizon
+    ground: tuple                # RGB radiance below the horizon
+    sun_dir: tuple | None        # unit vector towards the sun (None: overcast)
+    sun_radius_deg: float = 1.0
+    sun_irradiance: tuple = (0.0, 0.0, 0.0)   # RGB irradiance of the sun on a surface facing it
+    light_group: int = 0
+
+
+SKY_WIDTH = 512   # the environment map's width in texels (height half that): 0.7 degrees per texel
+
+
+def sky_texels(sky: Sky, width: int = SKY_WIDTH) -> np.ndarray:
+    """The sky as a latitude-longitude radiance map [width / 2, width, 3] in Mitsuba's `envmap` convention (y up;
+    texel (u, v) looks along (sin 2pi u sin pi v, cos pi v, -cos 2pi u sin pi v)). The sun disc is drawn
+    antialiased and then scaled so that the map's sun delivers exactly `sun_irradiance`, however few texels it
+    covers."""
+    h = width // 2
+    theta = (np.arange(h) + 0.5) / h * np.pi
+    phi = (np.arange(width) + 0.5) / width * 2 * np.pi
+    th, ph = np.meshgrid(theta, phi, indexing="ij")
+    d = np.stack([np.sin(ph) * np.sin(th), np.cos(th), -np.cos(ph) * np.sin(th)], -1)
+    up = np.clip(d[..., 1:2], 0.0, 1.0)
+    t = np.sqrt(up)   # the horizon's colour holds low above it, as in a real sky
+    sky_rgb = np.asarray(sky.horizon) * (1 - t) + np.asarray(sky.zenith) * t
+    out = np.where(d[..., 1:2] >= 0, sky_rgb, np.asarray(sky.ground)).astype(np.float64)
+    if sky.sun_dir is not None:
+        s = np.asarray(sky.sun_dir, float)
+        s = s / np.linalg.norm(s)
+        ang = np.arccos(np.clip(d @ s, -1.0, 1.0))
+        r, half_texel = math.radians(sky.sun_radius_deg), np.pi / h / 2
+        disc = np.clip((r + half_texel - ang) / (2 * half_texel), 0.0, 1.0)
+        solid = np.sin(th) * (np.pi / h) * (2 * np.pi / width)   # each texel's solid angle
+        flux = float((disc * solid).sum())
+        out += disc[..., None] * (np.asarray(sky.sun_irradiance) / max(flux, 1e-12))
+    return out.astype(np.float32)
+
+
+def _draw_sky(rng: np.random.Generator, light_group: int) -> Sky:
+    """A random sky: a blue-to-pale gradient at one of many brightnesses, and a sun of a few times the sky's
+    irradiance at 8-70 degrees elevation (warmer when low), or an overcast sky (a quarter of the scenes)."""
+    level = float(rng.uniform(0.3, 1.2))
+    zenith = np.array([0.25, 0.42, 0.9]) * level * rng.uniform(0.85, 1.15, 3)
+    horizon = np.array([0.8, 0.85, 0.95]) * level * rng.uniform(0.9, 1.1, 3)
+    ground = np.array([0.3, 0.26, 0.2]) * level * rng.uniform(0.1, 0.4)
+    if rng.random() < 0.25:   # overcast: a brighter, greyer sky and no sun
+        grey = float(horizon.mean()) * 1.5
+        return Sky(tuple(float(c) for c in np.full(3, grey) * rng.uniform(0.9, 1.1, 3)),
+                   tuple(float(c) for c in np.full(3, grey) * 1.2), tuple(float(c) for c in ground), None,
+                   light_group=light_group)
+    elev, azim = math.radians(rng.uniform(8, 70)), rng.uniform(0, 2 * math.pi)
+    sun_dir = (math.cos(elev) * math.sin(azim), math.sin(elev), -math.cos(elev) * math.cos(azim))
+    warm = np.array([1.0, 0.92 - 0.25 * (1 - elev / 1.3), 0.85 - 0.45 * (1 - elev / 1.3)])
+    irradiance = warm / warm.mean() * math.pi * level * rng.uniform(2.0, 8.0)
+    return Sky(tuple(float(c) for c in zenith), tuple(float(c) for c in horizon), tuple(float(c) for c in ground),
+               sun_dir, float(rng.uniform(0.5, 2.5)), tuple(float(c) for c in irradiance), light_group)
 
 
 # ---- transforms ---------------------------------------------------------------------------------------
@@ -168,7 +233,7 @@ MATERIALS = ("diffuse", "plastic", "roughplastic", "conductor", "roughconductor"
              "thindielectric", "textured")
 _NEW = dict(objects=(3, 6), panes=(0, 1), cards=(0, 1), thin=(0, 2), veils=(0, 0), glossy=0.4, dof=0.3,
             motion=1.0, materials=None, small_lights=(0, 0), exposure=2.0, fov=(25, 60), fences=(0, 0),
-            stacks=(0, 0), glass_sheets=(0, 0), tex_freq=(2, 32))
+            stacks=(0, 0), glass_sheets=(0, 0), tex_freq=(2, 32), sky=False)
 FAMILY_PARAMS = {
     # polished objects under small intense lights: conductors, plastics and glass (caustics, fireflies)
     "studio": {**_NEW, "objects": (3, 6), "panes": (0, 0), "thin": (0, 1),
@@ -191,6 +256,11 @@ FAMILY_PARAMS = {
     # matte and low-frequency textured materials (indirect, low-frequency noise: what flat denoisers handle best)
     "interior": {**_NEW, "objects": (4, 8), "thin": (0, 1), "walls": True, "bounce": 0.7,
                  "materials": dict(diffuse=4, textured=3, roughplastic=1, roughconductor=1), "tex_freq": (1, 8)},
+    # outdoors: objects, foliage and fences on the ground under a sky with a sun (or overcast), the key light
+    # group; the other groups are area lights as fill and rim
+    "exterior": {**_NEW, "objects": (4, 8), "cards": (0, 4), "fences": (0, 1), "sky": True,
+                 "materials": dict(diffuse=3, textured=2, plastic=1, roughplastic=1, conductor=1, roughconductor=1,
+                                   dielectric=1)},
 }
 PRESET_PARAMS.update(FAMILY_PARAMS)
 PRESETS = ("easy", "medium", "deep-heavy")           # the original presets, used in turn by default
@@ -278,9 +348,12 @@ def make_scene(seed: int, preset: str = "medium", size: int = 128, frames: int =
         add("rectangle", leaf, base, cutout=CUTOUT_LEAF, spin=float(rng.uniform(-25, 25) * m))
     if family:
         _family_extras(spec, p, rng, add, cam_o, cam_t, m)
+        if p["sky"]:   # the sky is the key light group; the other groups keep their area lights
+            spec.sky = _draw_sky(rng, 0)
+            spec.light_groups[0] = "sky"
     # area lights, one light group each (several lights may share a group)
     for g, _name in enumerate(spec.light_groups):
-        for _ in range(1 if g else int(rng.integers(1, 3))):
+        for _ in range(1 if g else (0 if spec.sky else int(rng.integers(1, 3)))):
             pos = [rng.uniform(-4, 4), rng.uniform(3.0, 5.0), rng.uniform(-3, 4)]
             aim = [0, 0.5, 0]
             if p.get("walls"):   # inside the room
@@ -305,6 +378,10 @@ def make_scene(seed: int, preset: str = "medium", size: int = 128, frames: int =
         for o in spec.objects:
             if o.radiance is not None:
                 o.radiance = tuple(float(c * gain) for c in o.radiance)
+        if spec.sky is not None:
+            k = spec.sky
+            k.zenith, k.horizon, k.ground, k.sun_irradiance = (tuple(float(c * gain) for c in v) for v in
+                                                                (k.zenith, k.horizon, k.ground, k.sun_irradiance))
     return spec
 
 
@@ -360,6 +437,8 @@ def mitsuba_dict(spec: SceneSpec, frame: int) -> dict:
         if o.radiance is not None:
             shape["emitter"] = {"type": "area", "radiance": {"type": "rgb", "value": list(o.radiance)}}
         d[f"obj{o.id}"] = shape
+    if spec.sky is not None:
+        d["sky"] = {"type": "envmap", "bitmap": sky_texels(spec.sky)}
     return d
 
 
@@ -374,5 +453,7 @@ def convert_transforms(d: dict) -> dict:
             val = convert_transforms(val)
         if key in ("to_world", "to_uv"):
             val = mi.ScalarTransform4f(np.asarray(val, dtype=np.float64).tolist())
+        if key == "bitmap":
+            val = mi.Bitmap(np.ascontiguousarray(val, dtype=np.float32))
         out[key] = val
     return out

@@ -15,7 +15,9 @@ Semi-transparent surfaces: at every intersection a sample first decides whether 
 1 - opacity, times an alpha cutout for foliage cards), before any shading, so all of a sample's radiance
 belongs to the surface where it stops. Shadow rays treat every surface as opaque (panes cast full shadows);
 noisy and reference renders share that rule. Paths are traced with next-event estimation and MIS up to
-`max_depth` bounces; the background is black and empty.
+`max_depth` bounces. Camera rays that miss everything leave their pixel empty (deep renders hold no sky); a path
+that leaves the scene after its first stop collects the environment light where the scene has one (scene.Sky),
+with MIS against its importance-sampled next-event estimate like any other emitter.
 """
 
 from __future__ import annotations
@@ -70,11 +72,16 @@ def load_frame(spec: SceneSpec, frame: int) -> FrameScene:
             group_size = max(group_size, em_reg + 1)
             emitters.append((o.id, s.emitter()))
     groups = np.full(group_size, -1, np.int32)
+    env = scene.environment()
+    if env is not None:   # the sky: after the shapes' emitters in the next-event list, in its light group
+        env_reg = int(dr.reinterpret_array(mi.UInt32, mi.EmitterPtr(env))[0])
+        em_groups[env_reg] = spec.sky.light_group
+        groups = np.full(max(group_size, env_reg + 1), -1, np.int32)
     for reg, g in em_groups.items():
         groups[reg] = g
     cam = look_at(spec.camera.origin[frame], spec.camera.target[frame])
     return FrameScene(scene, spec, frame, obj, opac, cut, groups, cam[:3, 3].copy(), cam[:3, 2].copy(),
-                      [e for _, e in sorted(emitters, key=lambda t: t[0])])
+                      [e for _, e in sorted(emitters, key=lambda t: t[0])] + ([env] if env is not None else []))
 
 
 REFERENCE_FIELDS = ("diffuse", "specular", "emission", "groups", "hit", "obj", "z")
@@ -198,10 +205,13 @@ def _loop(mi, dr, scene, emitters, n_emitters, ray, rng, tables, cam_o, cam_f, m
         later = shade & ~st["first"]
         st["dist"] = dr.select(passes & st["first"], st["dist"] + si.t, st["dist"])
 
-        # emitters hit by the path
-        em = si.emitter(scene, shade)
+        # emitters hit by the path; a path that leaves the scene after its first stop sees the environment (an
+        # invalid interaction's emitter), a camera ray that misses sees nothing
+        lit = shade | (active & ~si.is_valid() & ~st["first"])
+        later_lit = lit & ~st["first"]
+        em = si.emitter(scene, lit)
         em_reg = dr.reinterpret_array(mi.UInt32, em)
-        has_em = shade & (em_reg != 0)
+        has_em = lit & (em_reg != 0)
         le = em.eval(si, has_em)
         ds_hit = mi.DirectionSample3f(scene, si, st["prev_si"])
         em_pdf = scene.pdf_emitter_direction(st["prev_si"], ds_hit, has_em & ~st["prev_delta"])
@@ -209,8 +219,8 @@ def _loop(mi, dr, scene, emitters, n_emitters, ray, rng, tables, cam_o, cam_f, m
         g_hit = dr.gather(mi.Int32, grp_t, em_reg, has_em)
         st["emission"] = dr.select(first_now & has_em, st["emission"] + le, st["emission"])
         c_d, c_s = st["beta_d"] * le * w_hit, st["beta_s"] * le * w_hit
-        st["diffuse"] = dr.select(later & has_em, st["diffuse"] + c_d, st["diffuse"])
-        st["specular"] = dr.select(later & has_em, st["specular"] + c_s, st["specular"])
+        st["diffuse"] = dr.select(later_lit & has_em, st["diffuse"] + c_d, st["diffuse"])
+        st["specular"] = dr.select(later_lit & has_em, st["specular"] + c_s, st["specular"])
         add_group(st, g_hit, dr.select(first_now, le, c_d + c_s), has_em)
 
         # first-stop attributes
