@@ -26,9 +26,10 @@ from .params import width_range
 @click.option("--seed", default=0, show_default=True, type=int, help="Dataset seed: same seed, same files.")
 @click.option("--preset", "presets", multiple=True, type=click.Choice(list(FAMILIES)),
               help="Scene presets/families, used in turn (default: easy, medium, deep-heavy). The families "
-                   "studio, glass, thin, layers, textured, interior and exterior randomise materials (glass, "
-                   "metals, textures), lighting (small intense lights, bounce light, a sky with a sun, exposure) "
-                   "and geometry (fences, wires, layer stacks, walls).")
+                   "studio, glass, thin, layers, textured, interior, exterior and organic randomise materials "
+                   "(glass, metals, checkerboard and procedural textures), lighting (small intense lights, bounce "
+                   "light, a sky with a sun, exposure) and geometry (fences, wires, layer stacks, walls, blob and "
+                   "torus meshes).")
 @click.option("--kind", "kinds", multiple=True, type=click.Choice(["deepz", "deepoid"]),
               help="Deep kinds to write (default: both).")
 @click.option("--workers", default=min(2, os.cpu_count() or 1), show_default=True, type=click.IntRange(1),

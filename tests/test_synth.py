@@ -252,7 +252,8 @@ def test_cli_synth_rejects_bad_sample_counts(tmp_path):
     assert not (tmp_path / "x").exists()
 
 
-@pytest.mark.parametrize("family", ["studio", "glass", "thin", "layers", "textured", "interior", "exterior"])
+@pytest.mark.parametrize("family", ["studio", "glass", "thin", "layers", "textured", "interior", "exterior",
+                                    "organic"])
 def test_scene_families_draw_their_axes(family):
     """Each family draws the axes it names (over several seeds): glass objects, fences, layer stacks, small
     intense lights, textures; and the original presets never draw them."""
@@ -264,8 +265,8 @@ def test_scene_families_draw_their_axes(family):
             b = o.bsdf.get("bsdf", o.bsdf)
             out.add(b["type"])
             for v in b.values():
-                if isinstance(v, dict) and v.get("type") == "checkerboard":
-                    out.add("checkerboard")
+                if isinstance(v, dict) and v.get("type") in ("checkerboard", "ranad_noise"):
+                    out.add(v["type"])
         return out
 
     specs = [make_scene(s, family, 32, 1) for s in range(6)]
@@ -294,19 +295,25 @@ def test_scene_families_draw_their_axes(family):
     if family == "exterior":   # a sky in every scene as the first light group, and no area light in that group
         assert all(s.sky is not None and s.light_groups[0] == "sky" for s in specs)
         assert not any(o.radiance is not None and o.light_group == 0 for s in specs for o in s.objects)
-    else:
+    elif family != "organic":
         assert all(s.sky is None for s in specs)
+    if family == "organic":   # blobs and tori in procedural albedo maps, a sky in some scenes
+        kinds = {o.mesh["kind"] for s in specs for o in s.objects if o.kind == "mesh"}
+        assert kinds == {"blob", "torus"} and "ranad_noise" in types
+        assert {s.sky is None for s in specs} == {True, False}
+    else:
+        assert not any(o.kind == "mesh" for s in specs for o in s.objects) and "ranad_noise" not in types
     for preset in ("easy", "medium", "deep-heavy"):
         old = set().union(*(bsdf_types(make_scene(s, preset, 32, 1)) for s in range(6)))
-        assert not old & {"dielectric", "thindielectric", "checkerboard", "conductor", "plastic"}
+        assert not old & {"dielectric", "thindielectric", "checkerboard", "ranad_noise", "conductor", "plastic"}
 
 
 def test_a_family_scene_renders(tmp_path):
-    """A glass/fence/texture/sky scene goes through the whole writer: channels still sum to the beauty."""
-    cfg = dataset.SynthConfig(out=str(tmp_path / "ds"), scenes=3, size=24, frames=1, spp=(4,), ref_spp=16, seed=9,
-                              presets=("glass", "thin", "exterior"))
+    """A glass/fence/texture/sky/mesh scene goes through the whole writer: channels still sum to the beauty."""
+    cfg = dataset.SynthConfig(out=str(tmp_path / "ds"), scenes=4, size=24, frames=1, spp=(4,), ref_spp=16, seed=9,
+                              presets=("glass", "thin", "exterior", "organic"))
     dataset.run(cfg)
-    for i in range(3):
+    for i in range(4):
         img = read_deep(os.path.join(cfg.out, f"scene_{i:04d}", "deepz", "noisy_spp4.0000.exr"))
         parts = sum(cols(img, [f"{k}.{c}" for c in "RGB"]) for k in ("diffuse", "specular", "emission"))
         np.testing.assert_allclose(parts, cols(img, ["R", "G", "B"]), rtol=2e-3, atol=2e-3)

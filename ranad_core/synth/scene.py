@@ -13,19 +13,23 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .meshes import mesh_file
+from .textures import NOISE_STYLES, noise_texels
+
 CUTOUT_NONE, CUTOUT_LEAF, CUTOUT_FENCE = 0, 1, 2
 
 
 @dataclass
 class SceneObject:
     id: int                      # object id written to the deep-OID `id` channel (1, 2, ...; 0 = nothing)
-    kind: str                    # sphere | cube | rectangle | cylinder
+    kind: str                    # sphere | cube | rectangle | cylinder | mesh
     bsdf: dict                   # Mitsuba BSDF dictionary
     transforms: list             # 4x4 to-world matrix per frame
     opacity: float = 1.0         # < 1: a sample passes through with probability 1 - opacity (semi-transparent)
     cutout: int = CUTOUT_NONE    # alpha-textured card pattern
     radiance: tuple | None = None  # area emitter radiance (an object that is a light)
     light_group: int = -1        # index into SceneSpec.light_groups for emitters
+    mesh: dict | None = None     # kind "mesh": the procedural mesh's parameters (meshes.make_mesh)
 
 
 @dataclass
@@ -186,6 +190,14 @@ def _material(rng: np.random.Generator, weights: dict, tex_freq) -> dict:
     kind = names[int(rng.choice(len(names), p=p / p.sum()))]
     if kind == "diffuse":
         return {"type": "diffuse", "reflectance": {"type": "rgb", "value": _rgb(rng, 0.03, 0.95)}}
+    if kind == "noise":   # a procedural albedo map (textures.py), repeated a whole number of times
+        tex = {"type": "ranad_noise", "style": str(rng.choice(NOISE_STYLES)), "seed": int(rng.integers(1 << 31)),
+               "cells": int(2 ** rng.integers(1, 7)), "colour0": _rgb(rng, 0.02, 0.9), "colour1": _rgb(rng, 0.02, 0.9),
+               "to_uv": scale([int(rng.integers(1, 5)), int(rng.integers(1, 5)), 1]).tolist()}
+        if rng.random() < 0.3:
+            return {"type": "roughplastic", "distribution": "ggx", "alpha": float(rng.uniform(0.1, 0.4)),
+                    "diffuse_reflectance": tex}
+        return {"type": "diffuse", "reflectance": tex}
     if kind == "textured":
         f = float(np.exp(rng.uniform(np.log(tex_freq[0]), np.log(tex_freq[1]))))
         tex = {"type": "checkerboard", "color0": {"type": "rgb", "value": _rgb(rng, 0.02, 0.9)},
@@ -230,10 +242,10 @@ PRESET_PARAMS = {
 # and texture frequency. The three presets above keep their original draws (datasets made before the families
 # existed render identically); a family's extra axes are drawn after them.
 MATERIALS = ("diffuse", "plastic", "roughplastic", "conductor", "roughconductor", "dielectric", "roughdielectric",
-             "thindielectric", "textured")
+             "thindielectric", "textured", "noise")
 _NEW = dict(objects=(3, 6), panes=(0, 1), cards=(0, 1), thin=(0, 2), veils=(0, 0), glossy=0.4, dof=0.3,
             motion=1.0, materials=None, small_lights=(0, 0), exposure=2.0, fov=(25, 60), fences=(0, 0),
-            stacks=(0, 0), glass_sheets=(0, 0), tex_freq=(2, 32), sky=False)
+            stacks=(0, 0), glass_sheets=(0, 0), tex_freq=(2, 32), sky=0.0, meshes=(0, 0))
 FAMILY_PARAMS = {
     # polished objects under small intense lights: conductors, plastics and glass (caustics, fireflies)
     "studio": {**_NEW, "objects": (3, 6), "panes": (0, 0), "thin": (0, 1),
@@ -258,9 +270,14 @@ FAMILY_PARAMS = {
                  "materials": dict(diffuse=4, textured=3, roughplastic=1, roughconductor=1), "tex_freq": (1, 8)},
     # outdoors: objects, foliage and fences on the ground under a sky with a sun (or overcast), the key light
     # group; the other groups are area lights as fill and rim
-    "exterior": {**_NEW, "objects": (4, 8), "cards": (0, 4), "fences": (0, 1), "sky": True,
+    "exterior": {**_NEW, "objects": (4, 8), "cards": (0, 4), "fences": (0, 1), "sky": 1.0,
                  "materials": dict(diffuse=3, textured=2, plastic=1, roughplastic=1, conductor=1, roughconductor=1,
                                    dielectric=1)},
+    # smooth irregular shapes (blobs, tori: meshes.py) in procedural albedo maps (clouds, marble, stripes, tiles:
+    # textures.py), under area lights or, in half the scenes, a sky
+    "organic": {**_NEW, "objects": (1, 3), "meshes": (3, 6), "thin": (0, 1), "sky": 0.5,
+                "materials": dict(diffuse=2, noise=4, textured=1, plastic=1, roughplastic=2, roughconductor=1,
+                                  dielectric=1, roughdielectric=1)},
 }
 PRESET_PARAMS.update(FAMILY_PARAMS)
 PRESETS = ("easy", "medium", "deep-heavy")           # the original presets, used in turn by default
@@ -348,7 +365,8 @@ def make_scene(seed: int, preset: str = "medium", size: int = 128, frames: int =
         add("rectangle", leaf, base, cutout=CUTOUT_LEAF, spin=float(rng.uniform(-25, 25) * m))
     if family:
         _family_extras(spec, p, rng, add, cam_o, cam_t, m)
-        if p["sky"]:   # the sky is the key light group; the other groups keep their area lights
+        if p["sky"] >= 1 or (p["sky"] > 0 and rng.random() < p["sky"]):   # the sky is the key light group;
+            # the other groups keep their area lights
             spec.sky = _draw_sky(rng, 0)
             spec.light_groups[0] = "sky"
     # area lights, one light group each (several lights may share a group)
@@ -419,6 +437,20 @@ def _family_extras(spec: SceneSpec, p: dict, rng: np.random.Generator, add, cam_
             walls.append(translate([WALL, 0, 0]) @ rotate([0, 1, 0], -90) @ scale(8))
         for base in walls:
             add("rectangle", _material(rng, dict(diffuse=2, textured=1), (1, 4)), base, vel=np.zeros(3))
+    if p["meshes"][1] > 0:   # blobs and tori standing on the ground
+        for _ in range(int(rng.integers(*p["meshes"], endpoint=True))):
+            s = rng.uniform(0.3, 0.7)
+            if rng.random() < 0.7:
+                mesh = {"kind": "blob", "seed": int(rng.integers(1 << 31)), "waves": int(rng.integers(3, 9)),
+                        "amplitude": float(rng.uniform(0.1, 0.45))}
+                lift, shape = s * (1 + mesh["amplitude"]), scale(s)
+            else:
+                mesh = {"kind": "torus", "minor": float(rng.uniform(0.2, 0.5))}
+                shape = rotate(rng.normal(size=3), rng.uniform(0, 180)) @ scale(s)
+                lift = s * (1 + mesh["minor"])
+            base = translate([rng.uniform(-2.2, 2.2), lift, rng.uniform(-2.0, 2.0)]) @ shape
+            add("mesh", _material(rng, p["materials"], p["tex_freq"]), base, spin=float(rng.uniform(-15, 15) * m),
+                mesh=mesh)
 
 
 def mitsuba_dict(spec: SceneSpec, frame: int) -> dict:
@@ -433,13 +465,24 @@ def mitsuba_dict(spec: SceneSpec, frame: int) -> dict:
         sensor["focus_distance"] = cam.focus
     d = {"type": "scene", "sensor": sensor}
     for o in spec.objects:
-        shape = {"type": o.kind, "to_world": np.asarray(o.transforms[frame]).tolist(), "bsdf": o.bsdf}
+        shape = {"type": o.kind, "to_world": np.asarray(o.transforms[frame]).tolist(), "bsdf": _realised(o.bsdf)}
+        if o.kind == "mesh":
+            shape.update(type="obj", filename=mesh_file(o.mesh))
         if o.radiance is not None:
             shape["emitter"] = {"type": "area", "radiance": {"type": "rgb", "value": list(o.radiance)}}
         d[f"obj{o.id}"] = shape
     if spec.sky is not None:
         d["sky"] = {"type": "envmap", "bitmap": sky_texels(spec.sky)}
     return d
+
+
+def _realised(bsdf: dict) -> dict:
+    """`bsdf` with its procedural textures made into Mitsuba bitmap textures (texels as numpy arrays, which
+    convert_transforms hands to Mitsuba)."""
+    if bsdf.get("type") == "ranad_noise":
+        params = {k: v for k, v in bsdf.items() if k not in ("type", "to_uv")}
+        return {"type": "bitmap", "bitmap": noise_texels(params), "raw": True, "to_uv": bsdf["to_uv"]}
+    return {k: _realised(v) if isinstance(v, dict) else v for k, v in bsdf.items()}
 
 
 def convert_transforms(d: dict) -> dict:
