@@ -96,6 +96,67 @@ def test_sky_lit_reference_matches_mitsuba_path_tracer(seed):
     np.testing.assert_allclose(grp, parts, rtol=2e-3, atol=2e-3)
 
 
+@pytest.mark.parametrize("seed,depth", [(3, 2.0), (2, 4.0)])
+def test_fog_reference_matches_mitsuba_volume_path_tracer(seed, depth):
+    """Participating media: free flight, isotropic scattering with next-event estimation through the medium,
+    transmittance on every shadow ray, against Mitsuba's `volpath` with the same homogeneous medium in a null-
+    bounded sphere (block means between its max_depth 4 and 5, as for surfaces); seed 3 is lit by area lights,
+    seed 2 by a sky (hidden from the camera in both renderers), optical depths 2 and 4 across the sphere."""
+    import mitsuba as mi
+
+    from ranad_core.synth.scene import Medium
+
+    spec = make_scene(seed, "fog", 32, 1)
+    spec.objects = [o for o in spec.objects if o.opacity == 1.0 and o.cutout == 0
+                    and "dielectric" not in o.bsdf.get("bsdf", o.bsdf)["type"]]
+    m0 = spec.media[0]
+    r = float(np.mean(m0.radii))   # Mitsuba's spheres take no non-uniform scale
+    spec.media = [Medium(m0.id, m0.centre, (r, r, r), depth / (2 * r), m0.albedo)]
+    assert (spec.sky is not None) == (seed == 2)
+    fs = load_frame(spec, 0)
+    _, lay, _ = render_noisy(spec, 0, 64, "oid", 1, fs)
+    [(ref, _)] = render_reference(spec, 0, 512, [lay], 3, fs)
+    thick = ref.channel("ZBack") > ref.channel("Z")
+    assert thick.sum() > 20 and (ref.ids["id"][thick] == m0.id).all()
+    blocks = lambda im: im.reshape(4, 8, 4, 8, 3).mean((1, 3)).mean(-1)  # noqa: E731
+    a = blocks(ref.flatten()[..., :3].astype(np.float64))
+    lo, hi = [], []
+    for max_depth, out in ((4, lo), (5, hi)):
+        d = convert_transforms(mitsuba_dict(spec, 0))
+        d["integrator"] = {"type": "volpath", "max_depth": max_depth, "hide_emitters": spec.sky is not None}
+        d["fog"] = {"type": "sphere", "center": list(m0.centre), "radius": r, "bsdf": {"type": "null"},
+                    "interior": {"type": "homogeneous", "sigma_t": spec.media[0].sigma_t,
+                                 "albedo": {"type": "rgb", "value": list(m0.albedo)}, "phase": {"type": "isotropic"}}}
+        out.append(blocks(np.asarray(mi.render(mi.load_dict(d), spp=512, seed=9), dtype=np.float64)[..., :3]))
+    lo, hi = np.minimum(lo[0], hi[0]), np.maximum(lo[0], hi[0])
+    assert lo.mean() * 0.98 <= a.mean() <= hi.mean() * 1.02
+    tol = 0.05 * hi + 0.01 * hi.mean()
+    assert np.all((a >= lo - tol) & (a <= hi + tol))
+
+
+def test_fog_scenes_write_volume_bins(tmp_path):
+    """Through the whole writer (deep-Z and deep-OID, box and Gaussian film): volume bins span their medium
+    (ZBack > Z, one per pixel and medium, however spread their samples' depths), the references share the noisy
+    bins and their depths, channels sum."""
+    for pf in ("box", "gaussian"):
+        cfg = dataset.SynthConfig(out=str(tmp_path / pf), scenes=1, size=24, frames=1, spp=(16,), ref_spp=64,
+                                  seed=5, presets=("fog",), pixel_filter=pf)
+        dataset.run(cfg)
+        for kind in ("deepz", "deepoid"):
+            n = read_deep(os.path.join(cfg.out, "scene_0000", kind, "noisy_spp16.0000.exr"))
+            r = read_deep(os.path.join(cfg.out, "scene_0000", kind, "reference_spp16.0000.exr"))
+            z, zb = n.channel("Z"), n.channel("ZBack")
+            thick = zb > z
+            assert thick.sum() > 10 and (zb >= z).all()
+            pix = n.pixel_index()
+            assert np.bincount(pix[thick]).max() <= 2   # one volume bin per pixel and medium (fog draws 1-2)
+            np.testing.assert_array_equal(r.offsets, n.offsets)
+            np.testing.assert_array_equal(r.channel("Z")[thick], z[thick])
+            np.testing.assert_array_equal(r.channel("ZBack")[thick], zb[thick])
+            parts = sum(cols(n, [f"{k}.{c}" for c in "RGB"]) for k in ("diffuse", "specular", "emission"))
+            np.testing.assert_allclose(parts, cols(n, ["R", "G", "B"]), rtol=2e-3, atol=2e-3)
+
+
 def test_sky_map_delivers_its_sun_and_gradient():
     """The sky's texels: the sun disc integrates (radiance x solid angle x cosine to the sun) to the irradiance it
     was drawn with, wherever it sits on the map; the zenith row has the zenith's colour, the rows below the horizon
@@ -253,7 +314,7 @@ def test_cli_synth_rejects_bad_sample_counts(tmp_path):
 
 
 @pytest.mark.parametrize("family", ["studio", "glass", "thin", "layers", "textured", "interior", "exterior",
-                                    "organic"])
+                                    "organic", "fog"])
 def test_scene_families_draw_their_axes(family):
     """Each family draws the axes it names (over several seeds): glass objects, fences, layer stacks, small
     intense lights, textures; and the original presets never draw them."""
@@ -295,8 +356,13 @@ def test_scene_families_draw_their_axes(family):
     if family == "exterior":   # a sky in every scene as the first light group, and no area light in that group
         assert all(s.sky is not None and s.light_groups[0] == "sky" for s in specs)
         assert not any(o.radiance is not None and o.light_group == 0 for s in specs for o in s.objects)
-    elif family != "organic":
+    elif family not in ("organic", "fog"):
         assert all(s.sky is None for s in specs)
+    if family == "fog":   # one or two media in every scene, with ids of their own
+        assert all(1 <= len(s.media) <= 2 for s in specs)
+        assert all(not {m.id for m in s.media} & {o.id for o in s.objects} for s in specs)
+    else:
+        assert not any(s.media for s in specs)
     if family == "organic":   # blobs and tori in procedural albedo maps, a sky in some scenes
         kinds = {o.mesh["kind"] for s in specs for o in s.objects if o.kind == "mesh"}
         assert kinds == {"blob", "torus"} and "ranad_noise" in types
@@ -318,6 +384,28 @@ def test_a_family_scene_renders(tmp_path):
         parts = sum(cols(img, [f"{k}.{c}" for c in "RGB"]) for k in ("diffuse", "specular", "emission"))
         np.testing.assert_allclose(parts, cols(img, ["R", "G", "B"]), rtol=2e-3, atol=2e-3)
         assert img.num_bins > 0
+
+
+def test_volume_samples_make_one_bin_per_medium():
+    """Deep-Z: a pixel's volume samples of one medium are one bin whatever their depths (2-7 here, gaps far above
+    the split rule), with Z/ZBack the nearest entry and farthest exit, in front of the surface at 10 behind it;
+    reference samples go to the medium's bin by medium (even outside the noisy samples' depth range) and to the
+    surface by depth."""
+    from ranad_core.synth.binning import accumulate, assign_to_layout, bin_values, layout_from_samples
+
+    z = np.array([2.0, 4.5, 7.0, 10.0, 10.02])
+    s = {"hit": np.ones(5, bool), "pixel": np.zeros(5, np.int64), "z": z, "obj": np.array([9, 9, 9, 1, 1], np.uint32),
+         "volume": np.array([True, True, True, False, False]), "zin": np.array([1.5, 1.8, 1.6, 0, 0]),
+         "zout": np.array([8.0, 7.5, 7.9, 0, 0]), "groups": np.zeros((5, 3)),
+         **{k: np.ones((5, 3)) for k in ("diffuse", "specular", "emission")}}
+    lay, sb = layout_from_samples(s, 1, 1, "z")
+    assert len(lay.pixel) == 2 and list(lay.volume) == [True, False] and list(sb) == [0, 0, 0, 1, 1]
+    vals = bin_values(accumulate(s, sb, 2, npixels=1), lay, 5)
+    np.testing.assert_allclose(vals["Z"], [1.5, 10.01])
+    np.testing.assert_allclose(vals["ZBack"], [8.0, 10.01])
+    ref = {"hit": np.ones(3, bool), "pixel": np.zeros(3, np.int64), "z": np.array([7.8, 10.1, 10.2]),
+           "obj": np.array([9, 1, 1], np.uint32), "volume": np.array([True, False, False])}
+    assert list(assign_to_layout(ref, lay)) == [0, 1, 1]
 
 
 def test_bin_gap_splits_a_surface_into_thin_bins():

@@ -7,7 +7,11 @@ Rules (documented in README, "Synthetic data"):
   more than 3% plus 1 cm (Z_GAP_REL, Z_GAP_ABS; `gap_rel` overrides the 3%: a small one splits a surface into
   many thin bins, as renderers that merge less do); no id channel.
 * Per bin: the mean of every attribute (albedo, normal, position, motion), `coverage` = samples in the bin / spp,
-  Z = ZBack = the mean depth (surfaces are points, not volumes), and radiance-like channels as sums / spp.
+  Z = ZBack = the mean depth (surfaces are points), and radiance-like channels as sums / spp.
+* Volume samples (first stop inside a participating medium, trace.py): one bin per (pixel, medium) in both kinds,
+  whatever their depths, with Z and ZBack where the pixel's noisy samples entered and left the medium (the
+  nearest entry, the farthest exit): a volume bin spans its medium, Z < ZBack. References are binned into it by
+  medium, like deep-OID.
   With a pixel filter (pixel_filter.py) a sample counts in every pixel its filter reaches, with its weight, and
   spp becomes the pixel's total weight: means are weighted, coverage the bin's share of the pixel's weight.
 * EXR alpha: bins are ordered front to back and bin i gets A_i = c_i / (1 - sum_{j<i} c_j) with its colours
@@ -42,6 +46,9 @@ class BinLayout:
     zmin: np.ndarray
     zmax: np.ndarray
     kind: str              # "oid" or "z"
+    volume: np.ndarray | None = None   # bool [B]: a volume bin (None: the image has none)
+    zfront: np.ndarray | None = None   # [B] a volume bin's Z and ZBack (entry and exit depths; surfaces: unused)
+    zback: np.ndarray | None = None
 
     @property
     def offsets(self) -> np.ndarray:
@@ -55,16 +62,21 @@ def layout_from_samples(s: dict, width: int, height: int, kind: str,
     deep-Z split rule's relative depth gap (the absolute 1 cm applies only with the default gap)."""
     hit = np.flatnonzero(s["hit"])
     pix, z, obj = s["pixel"][hit], s["z"][hit], s["obj"][hit]
+    vol = s["volume"][hit] if "volume" in s and s["volume"].any() else None
     if kind == "oid":
         order = np.lexsort((z, obj, pix))
         key_change = np.ones(len(order), bool)
         key_change[1:] = (pix[order][1:] != pix[order][:-1]) | (obj[order][1:] != obj[order][:-1])
     elif kind == "z":
-        order = np.lexsort((z, pix))
+        # volume samples: one group per medium; surface samples (group 0) split where depth jumps
+        group = np.zeros(len(hit), np.int64) if vol is None else np.where(vol, obj.astype(np.int64) + 1, 0)
+        order = np.lexsort((z, group, pix))
         zs = z[order]
         key_change = np.ones(len(order), bool)
         gap_abs = Z_GAP_ABS if gap_rel == Z_GAP_REL else 0.0
-        key_change[1:] = (pix[order][1:] != pix[order][:-1]) | (zs[1:] > zs[:-1] * (1 + gap_rel) + gap_abs)
+        gs = group[order]
+        key_change[1:] = (pix[order][1:] != pix[order][:-1]) | (gs[1:] != gs[:-1]) | \
+            ((gs[1:] == 0) & (zs[1:] > zs[:-1] * (1 + gap_rel) + gap_abs))
     else:
         raise ValueError(f"unknown deep kind {kind!r}")
     bin_sorted = np.cumsum(key_change) - 1
@@ -88,15 +100,29 @@ def layout_from_samples(s: dict, width: int, height: int, kind: str,
             if c > best_cnt[b]:
                 best[b], best_cnt[b] = o, c
         b_obj = best.astype(np.uint32)
+    b_vol = zfront = zback = None
+    front = zmin
+    if vol is not None:   # a volume bin spans its medium: the nearest entry, the farthest exit of its samples
+        starts = np.flatnonzero(key_change)
+        b_vol = vol[order][key_change]
+        zfront = np.minimum.reduceat(s["zin"][hit][order].astype(np.float64), starts) if nb else np.zeros(0)
+        zback = np.maximum.reduceat(s["zout"][hit][order].astype(np.float64), starts) if nb else np.zeros(0)
+        front = np.where(b_vol, zfront, zmin)
     # bins ordered by pixel, then front to back
-    ord2 = np.lexsort((zmin, b_pix))
+    ord2 = np.lexsort((front, b_pix))
     remap = np.empty(nb, np.int64)
     remap[ord2] = np.arange(nb)
     if nb:   # (without bins every sample_bin is already -1)
         sample_bin = np.where(sample_bin >= 0, remap[np.maximum(sample_bin, 0)], -1)
+    pick = (lambda a: None if a is None else a[ord2])  # noqa: E731
     lay = BinLayout(width, height, b_pix[ord2].astype(np.int64), np.asarray(b_obj)[ord2].astype(np.uint32),
-                    zmin[ord2], zmax[ord2], kind)
+                    zmin[ord2], zmax[ord2], kind, pick(b_vol), pick(zfront), pick(zback))
     return lay, sample_bin
+
+
+def _subset(lay: BinLayout, keep: np.ndarray) -> BinLayout:
+    """The bins `keep` (bool [B]) of a layout, in their order (a pixel's bins stay front to back)."""
+    return BinLayout(lay.width, lay.height, lay.pixel[keep], lay.obj[keep], lay.zmin[keep], lay.zmax[keep], lay.kind)
 
 
 def assign_to_layout(s: dict, lay: BinLayout) -> np.ndarray:
@@ -104,6 +130,18 @@ def assign_to_layout(s: dict, lay: BinLayout) -> np.ndarray:
     out = np.full(len(s["hit"]), -1, np.int64)
     hit = np.flatnonzero(s["hit"])
     if len(lay.pixel) == 0 or len(hit) == 0:
+        return out
+    if lay.kind == "z" and lay.volume is not None and lay.volume.any():
+        # volume samples go to their pixel's bin of their medium, surface samples to the surface bins by depth
+        vol = s["volume"] if "volume" in s else np.zeros(len(s["hit"]), bool)
+        for is_vol in (False, True):
+            keep = lay.volume == is_vol
+            sub = _subset(lay, keep)
+            if is_vol:
+                sub.kind = "oid"
+            part = assign_to_layout({**s, "hit": s["hit"] & (vol == is_vol)}, sub)
+            ok = part >= 0
+            out[ok] = np.flatnonzero(keep)[part[ok]]
         return out
     pix, z, obj = s["pixel"][hit], s["z"][hit], s["obj"][hit]
     if lay.kind == "oid":
@@ -224,5 +262,9 @@ def bin_values(acc: dict, lay: BinLayout, spp: int) -> dict:
             out[name] = acc[name] / safe
     mean_z = acc["z"] / safe[:, 0]
     out["Z"] = np.where(count > 0, mean_z, 0.5 * (lay.zmin + lay.zmax))
+    out["ZBack"] = out["Z"]
+    if lay.volume is not None:
+        out["Z"] = np.where(lay.volume, lay.zfront, out["Z"])
+        out["ZBack"] = np.where(lay.volume, lay.zback, out["ZBack"])
     out["unbinned_energy"] = acc["unbinned"] / acc["total"] if acc["total"] > 0 else 0.0
     return out

@@ -42,10 +42,10 @@ def splat(s: dict, width_px: int, height_px: int, filt: str, filter_width: float
     """Samples replicated into every pixel their filter reaches, each copy with its weight in `weight`.
 
     `s` needs `pixel` (row-major index), `sx`, `sy` (position in the pixel, [0, 1)). The copies carry what binning
-    reads per sample (`pixel`, `weight`, `hit`, `z`, `obj`) and `_src`, each copy's sample in `_parent` (= s),
-    whose channel matrix binning gathers once (copying every channel of every copy took most of a scene's time).
-    `sample(copies, name)` gives any other channel per copy. Box filtering returns `s` itself (weights implicit 1,
-    the existing path).
+    reads per sample (`pixel`, `weight`, `hit`, `z`, `obj`, and with media `volume`, `zin`, `zout`) and `_src`,
+    each copy's sample in `_parent` (= s), whose channel matrix binning gathers once (copying every channel of
+    every copy took most of a scene's time). `sample(copies, name)` gives any other channel per copy. Box
+    filtering returns `s` itself (weights implicit 1, the existing path).
     """
     if filt == "box":
         return s
@@ -66,7 +66,7 @@ def splat(s: dict, width_px: int, height_px: int, filt: str, filter_width: float
             pix.append(ty[keep] * width_px + tx[keep])
             wts.append(w[keep])
     order = np.concatenate(src)
-    out = {k: s[k][order] for k in ("hit", "z", "obj") if k in s}
+    out = {k: s[k][order] for k in ("hit", "z", "obj", "volume", "zin", "zout") if k in s}
     out.update(pixel=np.concatenate(pix).astype(np.int64), weight=np.concatenate(wts), _src=order, _parent=s)
     return out
 

@@ -40,6 +40,7 @@ def add_motion(spec: SceneSpec, frame: int, s: dict) -> None:
     pos = s["position"].astype(np.float64)
     here = project(spec, frame, pos)
     mats = {o.id: [np.asarray(m) for m in o.transforms] for o in spec.objects}
+    mats.update({m.id: [np.eye(4)] * spec.frames for m in spec.media})   # media do not move
     for name, other in (("motion_prev", frame - 1), ("motion_next", frame + 1)):
         mv = np.zeros((len(pos), 2), np.float32)
         if 0 <= other < spec.frames:
@@ -73,7 +74,7 @@ def deep_image(spec: SceneSpec, lay: BinLayout, vals: dict, with_motion: bool) -
         put(c, total[:, i])
     put("A", vals["A"])
     put("Z", vals["Z"], "float")
-    put("ZBack", vals["Z"], "float")
+    put("ZBack", vals["ZBack"], "float")
     for layer in ("diffuse", "specular", "emission"):
         for i, c in enumerate("RGB"):
             put(f"{layer}.{c}", vals[layer][:, i])

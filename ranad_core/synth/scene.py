@@ -52,6 +52,10 @@ class SceneSpec:
     objects: list = field(default_factory=list)
     light_groups: list = field(default_factory=list)
     sky: "Sky | None" = None      # an environment light (families with `sky`), else none
+    media: list = field(default_factory=list)   # participating media (Medium), static
+
+    def medium(self, oid: int) -> "Medium | None":
+        return next((m for m in self.media if m.id == oid), None)
 
 
     def object(self, oid: int) -> SceneObject:
@@ -70,6 +74,18 @@ class Sky:
     sun_radius_deg: float = 1.0
     sun_irradiance: tuple = (0.0, 0.0, 0.0)   # RGB irradiance of the sun on a surface facing it
     light_group: int = 0
+
+
+@dataclass
+class Medium:
+    """A homogeneous participating medium filling an axis-aligned ellipsoid (a fog bank, a smoke puff): light
+    scatters in it isotropically, and a sample that scatters there first makes a volume bin (Z < ZBack: where
+    its pixel's rays enter and leave the medium). Media do not move."""
+    id: int                      # the object id of its bins (deep-OID), unique among the scene's objects
+    centre: tuple
+    radii: tuple
+    sigma_t: float               # extinction per unit length (grey)
+    albedo: tuple                # single-scattering albedo, RGB
 
 
 SKY_WIDTH = 512   # the environment map's width in texels (height half that): 0.7 degrees per texel
@@ -245,7 +261,7 @@ MATERIALS = ("diffuse", "plastic", "roughplastic", "conductor", "roughconductor"
              "thindielectric", "textured", "noise")
 _NEW = dict(objects=(3, 6), panes=(0, 1), cards=(0, 1), thin=(0, 2), veils=(0, 0), glossy=0.4, dof=0.3,
             motion=1.0, materials=None, small_lights=(0, 0), exposure=2.0, fov=(25, 60), fences=(0, 0),
-            stacks=(0, 0), glass_sheets=(0, 0), tex_freq=(2, 32), sky=0.0, meshes=(0, 0))
+            stacks=(0, 0), glass_sheets=(0, 0), tex_freq=(2, 32), sky=0.0, meshes=(0, 0), media=(0, 0))
 FAMILY_PARAMS = {
     # polished objects under small intense lights: conductors, plastics and glass (caustics, fireflies)
     "studio": {**_NEW, "objects": (3, 6), "panes": (0, 0), "thin": (0, 1),
@@ -278,6 +294,10 @@ FAMILY_PARAMS = {
     "organic": {**_NEW, "objects": (1, 3), "meshes": (3, 6), "thin": (0, 1), "sky": 0.5,
                 "materials": dict(diffuse=2, noise=4, textured=1, plastic=1, roughplastic=2, roughconductor=1,
                                   dielectric=1, roughdielectric=1)},
+    # participating media: ground fog banks and smoke puffs among the objects (volume bins), under area lights or,
+    # in a third of the scenes, a sky
+    "fog": {**_NEW, "objects": (3, 7), "media": (1, 2), "sky": 0.3,
+            "materials": dict(diffuse=3, textured=2, roughplastic=1, plastic=1, roughconductor=1, dielectric=1)},
 }
 PRESET_PARAMS.update(FAMILY_PARAMS)
 PRESETS = ("easy", "medium", "deep-heavy")           # the original presets, used in turn by default
@@ -369,6 +389,9 @@ def make_scene(seed: int, preset: str = "medium", size: int = 128, frames: int =
             # the other groups keep their area lights
             spec.sky = _draw_sky(rng, 0)
             spec.light_groups[0] = "sky"
+    if family and p["media"][1] > 0:
+        for _ in range(int(rng.integers(*p["media"], endpoint=True))):
+            spec.media.append(_draw_medium(rng, next(next_id)))
     # area lights, one light group each (several lights may share a group)
     for g, _name in enumerate(spec.light_groups):
         for _ in range(1 if g else (0 if spec.sky else int(rng.integers(1, 3)))):
@@ -401,6 +424,22 @@ def make_scene(seed: int, preset: str = "medium", size: int = 128, frames: int =
             k.zenith, k.horizon, k.ground, k.sun_irradiance = (tuple(float(c * gain) for c in v) for v in
                                                                 (k.zenith, k.horizon, k.ground, k.sun_irradiance))
     return spec
+
+
+def _draw_medium(rng: np.random.Generator, oid: int) -> Medium:
+    """A fog bank lying on the ground (wide and low) or a smoke puff among the objects, with an optical depth
+    through its thinnest axis of 0.3-4 (from a veil to nearly opaque) and a pale, slightly tinted albedo."""
+    if rng.random() < 0.5:
+        radii = (rng.uniform(2.5, 5.0), rng.uniform(0.3, 0.9), rng.uniform(1.5, 3.5))
+        centre = (rng.uniform(-1.0, 1.0), rng.uniform(0.0, 0.3), rng.uniform(-1.0, 2.0))
+    else:
+        r = rng.uniform(0.4, 1.2)
+        radii = tuple(r * rng.uniform(0.8, 1.25, 3))
+        centre = (rng.uniform(-2.0, 2.0), rng.uniform(0.4, 1.6), rng.uniform(-1.5, 3.0))
+    depth = float(np.exp(rng.uniform(np.log(0.3), np.log(4.0))))
+    albedo = np.clip(rng.uniform(0.7, 0.99) * rng.uniform(0.9, 1.1, 3), 0.0, 0.995)
+    return Medium(oid, tuple(float(c) for c in centre), tuple(float(c) for c in radii),
+                  float(depth / (2 * min(radii))), tuple(float(c) for c in albedo))
 
 
 WALL = 3.5   # the interior family's walls: the back wall at z = -WALL, the side walls at x = -+WALL

@@ -18,6 +18,14 @@ noisy and reference renders share that rule. Paths are traced with next-event es
 `max_depth` bounces. Camera rays that miss everything leave their pixel empty (deep renders hold no sky); a path
 that leaves the scene after its first stop collects the environment light where the scene has one (scene.Sky),
 with MIS against its importance-sampled next-event estimate like any other emitter.
+
+Participating media (scene.Medium: homogeneous, in analytic ellipsoids, no Mitsuba shapes): along every segment a
+free-flight distance is drawn per medium (exponential in its extinction); the nearest one before the surface is a
+scatter event: isotropic phase function, next-event estimation with the media's transmittance on the shadow ray
+(surface next-event estimates get it too), and the throughput times the medium's albedo. A sample whose first
+stop is a scatter event is a volume sample (`volume`), with the depths where its ray enters and leaves the medium
+(`zin`, `zout`: its bin's Z and ZBack); its radiance is all diffuse. Scenes without media draw no extra random
+numbers, so their samples are as before.
 """
 
 from __future__ import annotations
@@ -84,7 +92,7 @@ def load_frame(spec: SceneSpec, frame: int) -> FrameScene:
                       [e for _, e in sorted(emitters, key=lambda t: t[0])] + ([env] if env is not None else []))
 
 
-REFERENCE_FIELDS = ("diffuse", "specular", "emission", "groups", "hit", "obj", "z")
+REFERENCE_FIELDS = ("diffuse", "specular", "emission", "groups", "hit", "obj", "z", "volume")
 
 
 def trace(fs: FrameScene, spp: int, seed: int, start: int, count: int, max_depth: int = 4,
@@ -129,7 +137,7 @@ def trace(fs: FrameScene, spp: int, seed: int, start: int, count: int, max_depth
               mi.Int32(fs.group_of_emitter))
     out = _loop(mi, dr, fs.mi_scene, mi.EmitterPtr(fs.emitters), len(fs.emitters), ray, rng, tables,
                 mi.Point3f(*map(float, fs.cam_origin)), mi.Vector3f(*map(float, fs.cam_forward)), max_depth,
-                through_specular)
+                through_specular, spec.media)
     dr.eval(out)
     res = {"pixel": np.asarray(pix, dtype=np.int64), "sx": np.asarray(sx), "sy": np.asarray(sy)}
     want = set(fields or out)
@@ -141,6 +149,8 @@ def trace(fs: FrameScene, spp: int, seed: int, start: int, count: int, max_depth
             res[name] = a.T.copy() if a.ndim == 2 and a.shape[0] == 3 else a
     res["groups"] = np.stack([res.pop(f"group{g}") for g in range(len(spec.light_groups))], axis=1)
     res["hit"] = res["hit"].astype(bool)
+    if "volume" in res:
+        res["volume"] = res["volume"].astype(bool)
     return res
 
 
@@ -165,7 +175,29 @@ def _mis(a, b):
     return dr.detach(dr.select(a > 0, a2 / (a2 + dr.square(b)), 0.0))
 
 
-def _loop(mi, dr, scene, emitters, n_emitters, ray, rng, tables, cam_o, cam_f, max_depth, through=False):
+def _medium_span(mi, dr, o, d, med):
+    """(hit, t0, t1): where the ray o + t d (d unit) is inside `med`'s ellipsoid, t0 clamped to >= 0."""
+    c, r = mi.Vector3f(*map(float, med.centre)), mi.Vector3f(*map(float, med.radii))
+    lo, ld = (o - c) / r, d / r
+    a, b, cc = dr.dot(ld, ld), dr.dot(lo, ld), dr.dot(lo, lo) - 1.0
+    disc = b * b - a * cc
+    sq = dr.sqrt(dr.maximum(disc, 0.0))
+    t0, t1 = dr.maximum((-b - sq) / a, 0.0), (-b + sq) / a
+    return (disc > 0) & (t1 > t0), t0, t1
+
+
+def _transmittance(mi, dr, media, o, d, length):
+    """exp(-optical depth) of the media along o + t d, 0 <= t <= length (shadow rays)."""
+    tr = mi.Float(1.0)
+    for med in media:
+        hit, t0, t1 = _medium_span(mi, dr, o, d, med)
+        inside = dr.maximum(dr.minimum(t1, length) - t0, 0.0)
+        tr *= dr.select(hit, dr.exp(-float(med.sigma_t) * inside), 1.0)
+    return tr
+
+
+def _loop(mi, dr, scene, emitters, n_emitters, ray, rng, tables, cam_o, cam_f, max_depth, through=False,
+          media=()):
     obj_t, opac_t, cut_t, grp_t = tables
     n = dr.width(ray.o)
     black = mi.Color3f(0.0)
@@ -182,7 +214,8 @@ def _loop(mi, dr, scene, emitters, n_emitters, ray, rng, tables, cam_o, cam_f, m
         group0=mi.Color3f(0.0), group1=mi.Color3f(0.0), group2=mi.Color3f(0.0),
         hit=mi.Bool(False), obj=mi.UInt32(0), z=mi.Float(0.0), distance=mi.Float(0.0), albedo=mi.Color3f(0.0),
         normal=mi.Vector3f(0.0), position=mi.Point3f(0.0), rng=rng,
-        gopen=mi.Bool(False), gbeta=mi.Color3f(1.0))   # through-specular guides: still looking, and the throughput
+        gopen=mi.Bool(False), gbeta=mi.Color3f(1.0),   # through-specular guides: still looking, and the throughput
+        volume=mi.Bool(False), zin=mi.Float(0.0), zout=mi.Float(0.0))
 
     def add_group(st, g, value, mask):
         for k in range(MAX_GROUPS):
@@ -192,7 +225,23 @@ def _loop(mi, dr, scene, emitters, n_emitters, ray, rng, tables, cam_o, cam_f, m
         r = st["rng"]
         active = st["active"]
         si = scene.ray_intersect(st["ray"], mi.RayFlags.All, st["depth"] == 0, active)
-        valid = active & si.is_valid()
+        ray_o, ray_d = st["ray"].o, st["ray"].d
+        scatter = mi.Bool(False)
+        if media:   # free flight through each medium; the nearest scatter before the surface wins
+            t_end = dr.select(si.is_valid(), si.t, dr.inf)
+            t_sc = mi.Float(dr.inf)
+            m_id, m_alb, m_in, m_out = mi.UInt32(0), mi.Color3f(0.0), mi.Float(0.0), mi.Float(0.0)
+            for med in media:
+                hit_m, t0, t1 = _medium_span(mi, dr, ray_o, ray_d, med)
+                t_m = t0 - dr.log(1.0 - r.next_float32()) / float(med.sigma_t)
+                here = active & hit_m & (t_m < dr.minimum(t1, t_end)) & (t_m < t_sc)
+                t_sc = dr.select(here, t_m, t_sc)
+                m_id = dr.select(here, mi.UInt32(int(med.id)), m_id)
+                m_alb = dr.select(here, mi.Color3f(*map(float, med.albedo)), m_alb)
+                m_in = dr.select(here, t0, m_in)
+                m_out = dr.select(here, dr.minimum(t1, t_end), m_out)
+            scatter = active & dr.isfinite(t_sc)
+        valid = active & si.is_valid() & ~scatter
         reg = dr.reinterpret_array(mi.UInt32, si.shape)
         alpha = dr.gather(mi.Float, opac_t, reg, valid)
         cut = dr.gather(mi.UInt32, cut_t, reg, valid)
@@ -207,7 +256,7 @@ def _loop(mi, dr, scene, emitters, n_emitters, ray, rng, tables, cam_o, cam_f, m
 
         # emitters hit by the path; a path that leaves the scene after its first stop sees the environment (an
         # invalid interaction's emitter), a camera ray that misses sees nothing
-        lit = shade | (active & ~si.is_valid() & ~st["first"])
+        lit = shade | (active & ~si.is_valid() & ~scatter & ~st["first"])
         later_lit = lit & ~st["first"]
         em = si.emitter(scene, lit)
         em_reg = dr.reinterpret_array(mi.UInt32, em)
@@ -249,6 +298,8 @@ def _loop(mi, dr, scene, emitters, n_emitters, ray, rng, tables, cam_o, cam_f, m
         nee &= ds.pdf > 0
         visible = ~scene.ray_test(si.spawn_ray_to(ds.p), nee)
         em_w = dr.select(nee & visible, em_w * n_emitters, 0.0)
+        if media:
+            em_w *= _transmittance(mi, dr, media, si.p, ds.d, ds.dist)
         ds.pdf /= n_emitters
         wo = si.to_local(ds.d)
         f_all, pdf_b = bsdf.eval_pdf(ctx, si, wo, nee)
@@ -280,14 +331,60 @@ def _loop(mi, dr, scene, emitters, n_emitters, ray, rng, tables, cam_o, cam_f, m
         st["prev_si"] = dr.select(shade, si, st["prev_si"])
         st["prev_pdf"] = dr.select(shade, bs.pdf, st["prev_pdf"])
         st["prev_delta"] = dr.select(shade, delta, st["prev_delta"])
+        if media:
+            _scatter_event(st, scatter, t_sc, ray_o + ray_d * t_sc, m_id, m_alb, ray_o + ray_d * m_in,
+                           ray_o + ray_d * m_out)
         st["passes"] = dr.select(passes, st["passes"] + 1, st["passes"])
-        st["depth"] = dr.select(shade, st["depth"] + 1, st["depth"])
-        st["first"] = st["first"] & ~shade
+        st["depth"] = dr.select(shade | scatter, st["depth"] + 1, st["depth"])
+        st["first"] = st["first"] & ~shade & ~scatter
         alive = dr.max(st["beta_d"] + st["beta_s"]) > 0
-        st["active"] = (passes | (ok & alive)) & (st["depth"] < max_depth)
+        st["active"] = (passes | ((ok | scatter) & alive)) & (st["depth"] < max_depth)
         return st
+
+    def _scatter_event(st, scatter, t_sc, p, m_id, m_alb, p_in, p_out):
+        """A scatter event inside a medium: first-stop attributes (a volume sample), next-event estimation with
+        the isotropic phase function and the media's transmittance, and an isotropic continuation."""
+        r = st["rng"]
+        first_m = scatter & st["first"]
+        st["hit"] = st["hit"] | first_m
+        st["volume"] = st["volume"] | first_m
+        st["obj"] = dr.select(first_m, m_id, st["obj"])
+        st["z"] = dr.select(first_m, dr.dot(p - cam_o, cam_f), st["z"])
+        st["zin"] = dr.select(first_m, dr.dot(p_in - cam_o, cam_f), st["zin"])
+        st["zout"] = dr.select(first_m, dr.dot(p_out - cam_o, cam_f), st["zout"])
+        st["distance"] = dr.select(first_m, st["dist"] + t_sc, st["distance"])
+        st["albedo"] = dr.select(first_m, m_alb, st["albedo"])
+        st["normal"] = dr.select(first_m, mi.Vector3f(0.0), st["normal"])
+        st["position"] = dr.select(first_m, p, st["position"])
+        st["gopen"] = st["gopen"] & ~scatter
+        it = dr.zeros(mi.SurfaceInteraction3f, n)
+        it.p, it.t = p, mi.Float(0.0)
+        phase = 1.0 / (4.0 * math.pi)
+        pick = dr.minimum(mi.UInt32(r.next_float32() * n_emitters), n_emitters - 1)
+        emitter = dr.gather(mi.EmitterPtr, emitters, pick, scatter)
+        ds, em_w = emitter.sample_direction(it, mi.Point2f(r.next_float32(), r.next_float32()), scatter)
+        nee = scatter & (ds.pdf > 0)
+        visible = ~scene.ray_test(it.spawn_ray_to(ds.p), nee)
+        em_w = dr.select(nee & visible, em_w * n_emitters, 0.0) * _transmittance(mi, dr, media, p, ds.d, ds.dist)
+        w_nee = dr.select(ds.delta, 1.0, _mis(ds.pdf / n_emitters, phase))
+        light = m_alb * phase * em_w * w_nee
+        c_d = dr.select(first_m, light, st["beta_d"] * light)   # split as the first stop's lobes were
+        c_s = dr.select(first_m, mi.Color3f(0.0), st["beta_s"] * light)
+        st["diffuse"] = dr.select(nee, st["diffuse"] + c_d, st["diffuse"])
+        st["specular"] = dr.select(nee, st["specular"] + c_s, st["specular"])
+        em_reg = dr.reinterpret_array(mi.UInt32, ds.emitter)
+        add_group(st, dr.gather(mi.Int32, grp_t, em_reg, nee), c_d + c_s, nee & (em_reg != 0))
+        # isotropic continuation: phase / pdf = 1, so the throughput is multiplied by the albedo; at the first
+        # stop all of it is diffuse
+        wo = mi.warp.square_to_uniform_sphere(mi.Point2f(r.next_float32(), r.next_float32()))
+        st["beta_d"] = dr.select(first_m, m_alb, dr.select(scatter, st["beta_d"] * m_alb, st["beta_d"]))
+        st["beta_s"] = dr.select(first_m, mi.Color3f(0.0), dr.select(scatter, st["beta_s"] * m_alb, st["beta_s"]))
+        st["ray"] = dr.select(scatter, mi.Ray3f(p, wo), st["ray"])
+        st["prev_si"] = dr.select(scatter, it, st["prev_si"])
+        st["prev_pdf"] = dr.select(scatter, phase, st["prev_pdf"])
+        st["prev_delta"] = dr.select(scatter, mi.Bool(False), st["prev_delta"])
 
     (st,) = dr.while_loop((state,), lambda st: st["active"], lambda st: (body(st),))
     keep = ("diffuse", "specular", "emission", "group0", "group1", "group2", "hit", "obj", "z", "distance",
-            "albedo", "normal", "position")
+            "albedo", "normal", "position") + (("volume", "zin", "zout") if media else ())
     return {k: st[k] for k in keep}
