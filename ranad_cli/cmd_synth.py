@@ -26,10 +26,11 @@ from .params import width_range
 @click.option("--seed", default=0, show_default=True, type=int, help="Dataset seed: same seed, same files.")
 @click.option("--preset", "presets", multiple=True, type=click.Choice(list(FAMILIES)),
               help="Scene presets/families, used in turn (default: easy, medium, deep-heavy). The families "
-                   "studio, glass, thin, layers, textured, interior, exterior, organic and fog randomise "
-                   "materials (glass, metals, checkerboard and procedural textures), lighting (small intense "
-                   "lights, bounce light, a sky with a sun, exposure), geometry (fences, wires, layer stacks, walls, "
-                   "blob and torus meshes) and participating media (fog banks, smoke: volume bins).")
+                   "studio, glass, thin, layers, textured, interior, exterior, organic, fog and motion "
+                   "randomise materials (glass, metals, checkerboard and procedural textures), lighting (small "
+                   "intense lights, bounce light, a sky with a sun, exposure), geometry (fences, wires, layer "
+                   "stacks, walls, blob and torus meshes), participating media (fog banks, smoke: volume bins) and "
+                   "motion blur.")
 @click.option("--kind", "kinds", multiple=True, type=click.Choice(["deepz", "deepoid"]),
               help="Deep kinds to write (default: both).")
 @click.option("--workers", default=min(2, os.cpu_count() or 1), show_default=True, type=click.IntRange(1),

@@ -314,7 +314,7 @@ def test_cli_synth_rejects_bad_sample_counts(tmp_path):
 
 
 @pytest.mark.parametrize("family", ["studio", "glass", "thin", "layers", "textured", "interior", "exterior",
-                                    "organic", "fog"])
+                                    "organic", "fog", "motion"])
 def test_scene_families_draw_their_axes(family):
     """Each family draws the axes it names (over several seeds): glass objects, fences, layer stacks, small
     intense lights, textures; and the original presets never draw them."""
@@ -356,19 +356,21 @@ def test_scene_families_draw_their_axes(family):
     if family == "exterior":   # a sky in every scene as the first light group, and no area light in that group
         assert all(s.sky is not None and s.light_groups[0] == "sky" for s in specs)
         assert not any(o.radiance is not None and o.light_group == 0 for s in specs for o in s.objects)
-    elif family not in ("organic", "fog"):
+    elif family not in ("organic", "fog", "motion"):
         assert all(s.sky is None for s in specs)
     if family == "fog":   # one or two media in every scene, with ids of their own
         assert all(1 <= len(s.media) <= 2 for s in specs)
         assert all(not {m.id for m in s.media} & {o.id for o in s.objects} for s in specs)
     else:
         assert not any(s.media for s in specs)
+    assert all((s.shutter > 0) == (family == "motion") for s in specs)
     if family == "organic":   # blobs and tori in procedural albedo maps, a sky in some scenes
         kinds = {o.mesh["kind"] for s in specs for o in s.objects if o.kind == "mesh"}
         assert kinds == {"blob", "torus"} and "ranad_noise" in types
         assert {s.sky is None for s in specs} == {True, False}
     else:
-        assert not any(o.kind == "mesh" for s in specs for o in s.objects) and "ranad_noise" not in types
+        assert not any(o.kind == "mesh" for s in specs for o in s.objects)
+        assert ("ranad_noise" in types) == (family == "motion")   # the other families' materials are as before
     for preset in ("easy", "medium", "deep-heavy"):
         old = set().union(*(bsdf_types(make_scene(s, preset, 32, 1)) for s in range(6)))
         assert not old & {"dielectric", "thindielectric", "checkerboard", "ranad_noise", "conductor", "plastic"}
@@ -384,6 +386,67 @@ def test_a_family_scene_renders(tmp_path):
         parts = sum(cols(img, [f"{k}.{c}" for c in "RGB"]) for k in ("diffuse", "specular", "emission"))
         np.testing.assert_allclose(parts, cols(img, ["R", "G", "B"]), rtol=2e-3, atol=2e-3)
         assert img.num_bins > 0
+
+
+def _frozen(spec, dt):
+    """`spec` without motion blur, every object and the camera where they are `dt` frames after frame 0."""
+    import copy
+
+    from ranad_core.synth.scene import camera_at, pose_at
+
+    out = copy.deepcopy(spec)
+    out.shutter = 0.0
+    for o in out.objects:
+        o.transforms = [pose_at(spec, o, 0, dt)] + list(o.transforms[1:])
+    out.camera.origin = [list(camera_at(spec, 0, dt)[:3, 3])] + list(out.camera.origin[1:])
+    return out
+
+
+def test_motion_blur_is_the_mean_of_the_shutter_instants():
+    """A motion-blurred frame (each sample traced at its own instant of the shutter) flattens to the mean of
+    sharp renders of the scene frozen at those instants (8x8 block means, as the other tracer checks); the blur
+    spreads the moving objects' edges into more partially covered pixels; a scene that does not move renders the
+    same samples with and without a shutter."""
+    from ranad_core.synth.trace import shutter_offsets
+
+    spec = make_scene(2, "motion", 32, 1)
+    assert spec.shutter > 0.5
+    fs = load_frame(spec, 0)
+    assert len(fs.slots) == 8
+    blurred, lay, _ = render_noisy(spec, 0, 256, "oid", 1, fs)
+    a = blurred.flatten()
+    sharp = [render_noisy(_frozen(spec, dt), 0, 64, "oid", 1)[0].flatten() for dt in shutter_offsets(spec)]
+    b = np.mean(sharp, axis=0)
+    blocks = lambda im: im.reshape(4, 8, 4, 8, -1).mean((1, 3)).mean(-1)  # noqa: E731
+    ab, bb = blocks(a[..., :3].astype(np.float64)), blocks(b[..., :3].astype(np.float64))
+    assert abs(ab.mean() - bb.mean()) <= 0.03 * bb.mean()
+    assert np.all(np.abs(ab - bb) <= 0.08 * bb + 0.02 * bb.mean())
+    np.testing.assert_allclose(blocks(a[..., 3:4]), blocks(b[..., 3:4]), atol=0.04)
+    partial = lambda alpha: ((alpha > 0.05) & (alpha < 0.95)).sum()  # noqa: E731
+    assert partial(a[..., 3]) > 1.3 * partial(sharp[4][..., 3])
+
+    still = make_scene(2, "motion", 24, 1, motion=0.0)
+    assert still.shutter > 0
+    moving, _, _ = render_noisy(still, 0, 8, "z", 3)
+    still.shutter = 0.0
+    plain, _, _ = render_noisy(still, 0, 8, "z", 3)
+    np.testing.assert_array_equal(moving.values, plain.values)
+
+
+def test_motion_blurred_samples_keep_their_motion_vectors():
+    """The motion vectors of a blurred frame are those of the points at the frame's own instant: on each object,
+    their mean matches the sharp frame's (a few tenths of a pixel) although the samples were traced elsewhere."""
+    spec = make_scene(5, "motion", 48, 3)
+    blurred, lay_b, _ = render_noisy(spec, 1, 16, "oid", 1)
+    sharp_spec = make_scene(5, "motion", 48, 3)
+    sharp_spec.shutter = 0.0
+    sharp, lay_s, _ = render_noisy(sharp_spec, 1, 16, "oid", 1)
+    for oid in np.unique(lay_s.obj):
+        mb = cols(blurred, ["motion_next.X", "motion_next.Y"])[lay_b.obj == oid]
+        ms = cols(sharp, ["motion_next.X", "motion_next.Y"])[lay_s.obj == oid]
+        if len(ms) < 30 or len(mb) < 30:
+            continue
+        np.testing.assert_allclose(mb.mean(0), ms.mean(0), atol=0.3 + 0.05 * np.abs(ms.mean(0)).max())
 
 
 def test_volume_samples_make_one_bin_per_medium():

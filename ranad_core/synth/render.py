@@ -17,8 +17,8 @@ import numpy as np
 from ..deep import DeepImage
 from .binning import Z_GAP_REL, BinLayout, accumulate, assign_to_layout, bin_values, layout_from_samples
 from .pixel_filter import copies_per_sample, splat
-from .scene import SceneSpec, look_at
-from .trace import REFERENCE_FIELDS, load_frame, trace
+from .scene import SceneSpec, look_at, pose_at
+from .trace import REFERENCE_FIELDS, load_frame, shutter_offsets, trace_range
 
 CHUNK = 1 << 19   # samples traced per call (bounds the memory of one reference frame)
 
@@ -36,8 +36,20 @@ def project(spec: SceneSpec, frame: int, points: np.ndarray) -> np.ndarray:
 
 
 def add_motion(spec: SceneSpec, frame: int, s: dict) -> None:
-    """Per-sample motion vectors to the previous and next frame from the hit object's transforms."""
+    """Per-sample motion vectors to the previous and next frame from the hit object's transforms. A motion-blurred
+    sample (`slot`) is first carried to where its point is at the frame's own instant (the shutter's centre)."""
     pos = s["position"].astype(np.float64)
+    if "slot" in s:
+        pos = pos.copy()
+        objects = {o.id: o for o in spec.objects}
+        for k, dt in enumerate(shutter_offsets(spec)):
+            for oid in np.unique(s["obj"][s["hit"] & (s["slot"] == k)]):
+                o = objects.get(int(oid))
+                if o is None or dt == 0:   # media do not move
+                    continue
+                sel = s["hit"] & (s["slot"] == k) & (s["obj"] == oid)
+                m = pose_at(spec, o, frame, 0.0) @ np.linalg.inv(pose_at(spec, o, frame, dt))
+                pos[sel] = pos[sel] @ m[:3, :3].T + m[:3, 3]
     here = project(spec, frame, pos)
     mats = {o.id: [np.asarray(m) for m in o.transforms] for o in spec.objects}
     mats.update({m.id: [np.eye(4)] * spec.frames for m in spec.media})   # media do not move
@@ -56,8 +68,8 @@ def add_motion(spec: SceneSpec, frame: int, s: dict) -> None:
 
 def trace_all(fs, spp: int, seed: int, stratified: bool = False, through_specular: bool = False) -> dict:
     n = fs.spec.width * fs.spec.height * spp
-    parts = [trace(fs, spp, seed, start, min(CHUNK, n - start), stratified=stratified,
-                   through_specular=through_specular) for start in range(0, n, CHUNK)]
+    parts = [trace_range(fs, spp, seed, start, min(CHUNK, n - start), stratified=stratified,
+                         through_specular=through_specular) for start in range(0, n, CHUNK)]
     return {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
 
 
@@ -137,7 +149,7 @@ def render_reference(spec: SceneSpec, frame: int, ref_spp: int, layouts: list, s
     chunk = max(1, CHUNK // copies_per_sample(*pixel_filter))
     accs = [None] * len(layouts)
     for start in range(0, n, chunk):
-        s = trace(fs, ref_spp, seed, start, min(chunk, n - start), fields=REFERENCE_FIELDS)
+        s = trace_range(fs, ref_spp, seed, start, min(chunk, n - start), fields=REFERENCE_FIELDS)
         s = splat(s, spec.width, spec.height, *pixel_filter)
         for i, lay in enumerate(layouts):
             accs[i] = accumulate(s, assign_to_layout(s, lay), len(lay.pixel), accs[i], spec.width * spec.height)

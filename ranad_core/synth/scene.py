@@ -30,6 +30,7 @@ class SceneObject:
     radiance: tuple | None = None  # area emitter radiance (an object that is a light)
     light_group: int = -1        # index into SceneSpec.light_groups for emitters
     mesh: dict | None = None     # kind "mesh": the procedural mesh's parameters (meshes.make_mesh)
+    anim: dict | None = None     # base, velocity, axis, spin: the motion `transforms` sample (pose_at, any time)
 
 
 @dataclass
@@ -39,6 +40,7 @@ class Camera:
     fov: float = 40.0
     aperture: float = 0.0        # thin-lens aperture radius (0: pinhole)
     focus: float = 5.0
+    velocity: list | None = None  # per frame, xyz (the origin at any time, camera_at); None: as `origin` says
 
 
 @dataclass
@@ -53,6 +55,7 @@ class SceneSpec:
     light_groups: list = field(default_factory=list)
     sky: "Sky | None" = None      # an environment light (families with `sky`), else none
     media: list = field(default_factory=list)   # participating media (Medium), static
+    shutter: float = 0.0          # motion blur: the shutter stays open this fraction of a frame (0: none)
 
     def medium(self, oid: int) -> "Medium | None":
         return next((m for m in self.media if m.id == oid), None)
@@ -261,7 +264,8 @@ MATERIALS = ("diffuse", "plastic", "roughplastic", "conductor", "roughconductor"
              "thindielectric", "textured", "noise")
 _NEW = dict(objects=(3, 6), panes=(0, 1), cards=(0, 1), thin=(0, 2), veils=(0, 0), glossy=0.4, dof=0.3,
             motion=1.0, materials=None, small_lights=(0, 0), exposure=2.0, fov=(25, 60), fences=(0, 0),
-            stacks=(0, 0), glass_sheets=(0, 0), tex_freq=(2, 32), sky=0.0, meshes=(0, 0), media=(0, 0))
+            stacks=(0, 0), glass_sheets=(0, 0), tex_freq=(2, 32), sky=0.0, meshes=(0, 0), media=(0, 0),
+            shutter=(0.0, 0.0))
 FAMILY_PARAMS = {
     # polished objects under small intense lights: conductors, plastics and glass (caustics, fireflies)
     "studio": {**_NEW, "objects": (3, 6), "panes": (0, 0), "thin": (0, 1),
@@ -298,21 +302,43 @@ FAMILY_PARAMS = {
     # in a third of the scenes, a sky
     "fog": {**_NEW, "objects": (3, 7), "media": (1, 2), "sky": 0.3,
             "materials": dict(diffuse=3, textured=2, roughplastic=1, plastic=1, roughconductor=1, dielectric=1)},
+    # motion blur: objects and camera moving four times as fast, the shutter open for 0.25-1 frame (each sample at
+    # its own time: streaks, edges of partial coverage), thin wires and foliage among them
+    "motion": {**_NEW, "objects": (4, 8), "thin": (1, 3), "cards": (0, 3), "motion": 4.0, "shutter": (0.25, 1.0),
+               "materials": dict(diffuse=3, textured=2, noise=1, roughplastic=2, roughconductor=1, dielectric=1)},
 }
 PRESET_PARAMS.update(FAMILY_PARAMS)
 PRESETS = ("easy", "medium", "deep-heavy")           # the original presets, used in turn by default
 FAMILIES = tuple(PRESET_PARAMS)                      # every named scene family `ranad synth --preset` accepts
 
 
-def _animated(base: np.ndarray, frames: int, velocity, spin_axis, spin_deg: float) -> list:
-    """Per-frame to-world matrices: base, rotated about its own centre and moved by `velocity` per frame."""
+def _pose(base: np.ndarray, t: float, velocity, spin_axis, spin_deg: float) -> np.ndarray:
+    """The to-world matrix at time t (frames from the shot's centre): base, rotated about its own centre and
+    moved by `velocity` per frame."""
     centre = base[:3, 3].copy()
-    out = []
-    for f in range(frames):
-        t = f - (frames - 1) / 2
-        m = translate(centre + np.asarray(velocity) * t) @ rotate(spin_axis, spin_deg * t) @ translate(-centre) @ base
-        out.append(m)
-    return out
+    return translate(centre + np.asarray(velocity) * t) @ rotate(spin_axis, spin_deg * t) @ translate(-centre) @ base
+
+
+def _animated(base: np.ndarray, frames: int, velocity, spin_axis, spin_deg: float) -> list:
+    """Per-frame to-world matrices (_pose at each frame)."""
+    return [_pose(base, f - (frames - 1) / 2, velocity, spin_axis, spin_deg) for f in range(frames)]
+
+
+def pose_at(spec: SceneSpec, o: SceneObject, frame: int, dt: float) -> np.ndarray:
+    """An object's to-world matrix `dt` frames after `frame` (inside the shutter; dt = 0: the frame's own)."""
+    if dt == 0 or o.anim is None:
+        return np.asarray(o.transforms[frame])
+    a = o.anim
+    return _pose(np.asarray(a["base"]), frame - (spec.frames - 1) / 2 + dt, a["velocity"], a["axis"], a["spin"])
+
+
+def camera_at(spec: SceneSpec, frame: int, dt: float) -> np.ndarray:
+    """The camera's to-world matrix `dt` frames after `frame`."""
+    cam = spec.camera
+    origin = np.asarray(cam.origin[frame], float)
+    if dt and cam.velocity is not None:
+        origin = origin + np.asarray(cam.velocity) * dt
+    return look_at(origin, cam.target[frame])
 
 
 def make_scene(seed: int, preset: str = "medium", size: int = 128, frames: int = 3, motion: float = 1.0) -> SceneSpec:
@@ -333,7 +359,8 @@ def make_scene(seed: int, preset: str = "medium", size: int = 128, frames: int =
     cam_t = np.array([rng.uniform(-0.4, 0.4), rng.uniform(0.4, 0.9), 0.0])
     cam_v = rng.normal(0, 0.06 * m, 3)
     camera = Camera(origin=[list(cam_o + cam_v * (f - (frames - 1) / 2)) for f in range(frames)],
-                    target=[list(cam_t) for _ in range(frames)], fov=float(rng.uniform(32, 45)))
+                    target=[list(cam_t) for _ in range(frames)], fov=float(rng.uniform(32, 45)),
+                    velocity=[float(v) for v in cam_v])
     if family:
         camera.fov = float(rng.uniform(*p["fov"]))
     if rng.random() < p["dof"]:
@@ -351,8 +378,10 @@ def make_scene(seed: int, preset: str = "medium", size: int = 128, frames: int =
     def add(kind, bsdf, base, *, vel=None, spin=0.0, **kw):
         vel = rng.normal(0, 0.12 * m, 3) if vel is None else vel
         axis = rng.normal(size=3)
+        anim = {"base": np.asarray(base).tolist(), "velocity": [float(v) for v in vel],
+                "axis": [float(v) for v in axis], "spin": float(spin)}
         spec.objects.append(SceneObject(next(next_id), kind, bsdf,
-                                        _animated(base, frames, vel, axis, spin), **kw))
+                                        _animated(base, frames, vel, axis, spin), anim=anim, **kw))
 
     # ground (static), kept below everything; some presets leave background pixels empty above the horizon
     add("rectangle", _bsdf(rng, 0.1), translate([0, 0, 0]) @ rotate([1, 0, 0], -90) @ scale(8), vel=np.zeros(3))
@@ -423,6 +452,8 @@ def make_scene(seed: int, preset: str = "medium", size: int = 128, frames: int =
             k = spec.sky
             k.zenith, k.horizon, k.ground, k.sun_irradiance = (tuple(float(c * gain) for c in v) for v in
                                                                 (k.zenith, k.horizon, k.ground, k.sun_irradiance))
+        if p["shutter"][1] > 0:
+            spec.shutter = float(rng.uniform(*p["shutter"]))
     return spec
 
 
@@ -492,10 +523,11 @@ def _family_extras(spec: SceneSpec, p: dict, rng: np.random.Generator, add, cam_
                 mesh=mesh)
 
 
-def mitsuba_dict(spec: SceneSpec, frame: int) -> dict:
-    """The Mitsuba scene dictionary of one frame (no integrator: ranad traces its own paths)."""
+def mitsuba_dict(spec: SceneSpec, frame: int, dt: float = 0.0) -> dict:
+    """The Mitsuba scene dictionary of one frame, or of the instant `dt` frames after it inside the shutter (no
+    integrator: ranad traces its own paths)."""
     cam = spec.camera
-    to_world = look_at(cam.origin[frame], cam.target[frame])
+    to_world = camera_at(spec, frame, dt)
     sensor = {"type": "thinlens" if cam.aperture > 0 else "perspective", "fov": cam.fov,
               "to_world": to_world.tolist(),
               "film": {"type": "hdrfilm", "width": spec.width, "height": spec.height, "rfilter": {"type": "box"}}}
@@ -504,7 +536,7 @@ def mitsuba_dict(spec: SceneSpec, frame: int) -> dict:
         sensor["focus_distance"] = cam.focus
     d = {"type": "scene", "sensor": sensor}
     for o in spec.objects:
-        shape = {"type": o.kind, "to_world": np.asarray(o.transforms[frame]).tolist(), "bsdf": _realised(o.bsdf)}
+        shape = {"type": o.kind, "to_world": pose_at(spec, o, frame, dt).tolist(), "bsdf": _realised(o.bsdf)}
         if o.kind == "mesh":
             shape.update(type="obj", filename=mesh_file(o.mesh))
         if o.radiance is not None:

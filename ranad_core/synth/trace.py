@@ -26,20 +26,24 @@ scatter event: isotropic phase function, next-event estimation with the media's 
 stop is a scatter event is a volume sample (`volume`), with the depths where its ray enters and leaves the medium
 (`zin`, `zout`: its bin's Z and ZBack); its radiance is all diffuse. Scenes without media draw no extra random
 numbers, so their samples are as before.
+
+Motion blur (SceneSpec.shutter > 0): the frame's scene is loaded at TIME_SLOTS instants of the shutter and each
+sample is traced in the one its index picks (time_slot), with the random numbers it would have had anyway.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from .mitsuba_env import mitsuba
-from .scene import CUTOUT_FENCE, CUTOUT_LEAF, SceneSpec, convert_transforms, look_at, mitsuba_dict
+from .scene import CUTOUT_FENCE, CUTOUT_LEAF, SceneSpec, camera_at, convert_transforms, mitsuba_dict
 
 MAX_PASS_THROUGH = 16   # surfaces a sample may pass through before it is stopped at the next one
 MAX_GROUPS = 3          # light groups the loop carries
+TIME_SLOTS = 8          # motion blur: instants the shutter interval is sampled at (one Mitsuba scene each)
 
 
 @dataclass
@@ -55,13 +59,26 @@ class FrameScene:
     cam_origin: np.ndarray
     cam_forward: np.ndarray
     emitters: list                # in object-id order (Mitsuba's own emitter order changes between loads)
+    slots: list = field(default_factory=list)   # motion blur: the scene at each of the shutter's instants
 
 
-def load_frame(spec: SceneSpec, frame: int) -> FrameScene:
+def shutter_offsets(spec: SceneSpec) -> list:
+    """The instants (frames from the frame's own) motion blur samples: the centres of TIME_SLOTS equal parts of
+    the shutter interval, which is centred on the frame."""
+    return [((k + 0.5) / TIME_SLOTS - 0.5) * spec.shutter for k in range(TIME_SLOTS)]
+
+
+def time_slot(indices: np.ndarray, spp: int) -> np.ndarray:
+    """Each sample's instant: a pixel's samples take consecutive slots from an offset of their own, so every
+    pixel's samples are spread over the shutter (stratified in time) and neighbours start at different instants."""
+    return (indices % spp + 3 * (indices // spp)) % TIME_SLOTS
+
+
+def load_frame(spec: SceneSpec, frame: int, dt: float = 0.0) -> FrameScene:
     mi = mitsuba()
     import drjit as dr
 
-    scene = mi.load_dict(convert_transforms(mitsuba_dict(spec, frame)))
+    scene = mi.load_dict(convert_transforms(mitsuba_dict(spec, frame, dt)))
     shapes = scene.shapes()
     regs = [int(dr.reinterpret_array(mi.UInt32, mi.ShapePtr(s))[0]) for s in shapes]
     size = max(regs + [0]) + 1
@@ -87,17 +104,43 @@ def load_frame(spec: SceneSpec, frame: int) -> FrameScene:
         groups = np.full(max(group_size, env_reg + 1), -1, np.int32)
     for reg, g in em_groups.items():
         groups[reg] = g
-    cam = look_at(spec.camera.origin[frame], spec.camera.target[frame])
-    return FrameScene(scene, spec, frame, obj, opac, cut, groups, cam[:3, 3].copy(), cam[:3, 2].copy(),
-                      [e for _, e in sorted(emitters, key=lambda t: t[0])] + ([env] if env is not None else []))
+    cam = camera_at(spec, frame, dt)
+    fs = FrameScene(scene, spec, frame, obj, opac, cut, groups, cam[:3, 3].copy(), cam[:3, 2].copy(),
+                    [e for _, e in sorted(emitters, key=lambda t: t[0])] + ([env] if env is not None else []))
+    if spec.shutter > 0 and dt == 0:
+        fs.slots = [load_frame(spec, frame, t) for t in shutter_offsets(spec)]
+    return fs
+
+
+def trace_range(fs: FrameScene, spp: int, seed: int, start: int, count: int, **kw) -> dict:
+    """trace() of samples start..start+count-1, each at its own instant of the shutter where the scene has motion
+    blur (the samples of each instant traced in its scene, then put back in order; `slot` says which)."""
+    if not fs.slots:
+        return trace(fs, spp, seed, start, count, **kw)
+    idx = np.arange(start, start + count, dtype=np.int64)
+    slot = time_slot(idx, spp)
+    out = None
+    for k, fk in enumerate(fs.slots):
+        sel = np.flatnonzero(slot == k)
+        if len(sel) == 0:
+            continue
+        part = trace(fk, spp, seed, start, len(sel), indices=idx[sel], **kw)
+        if out is None:
+            out = {name: np.zeros((count,) + v.shape[1:], v.dtype) for name, v in part.items()}
+        for name, v in part.items():
+            out[name][sel] = v
+    out["slot"] = slot
+    return out
 
 
 REFERENCE_FIELDS = ("diffuse", "specular", "emission", "groups", "hit", "obj", "z", "volume")
 
 
 def trace(fs: FrameScene, spp: int, seed: int, start: int, count: int, max_depth: int = 4,
-          fields: tuple | None = None, stratified: bool = False, through_specular: bool = False) -> dict:
-    """Samples start..start+count-1 of the frame (sample i belongs to pixel i // spp), as numpy arrays.
+          fields: tuple | None = None, stratified: bool = False, through_specular: bool = False,
+          indices: np.ndarray | None = None) -> dict:
+    """Samples start..start+count-1 of the frame (sample i belongs to pixel i // spp), or the samples `indices` of
+    that range, as numpy arrays (with the random numbers they get in the whole range).
 
     fields: the outputs to return besides pixel/sx/sy (default: all); references need only REFERENCE_FIELDS.
     stratified: the pixel and lens positions jittered in a pixel's n x n strata (n = floor(sqrt(spp)), the lens
@@ -113,10 +156,21 @@ def trace(fs: FrameScene, spp: int, seed: int, start: int, count: int, max_depth
 
     spec = fs.spec
     W, H = spec.width, spec.height
-    idx = dr.arange(mi.UInt32, count) + dr.opaque(mi.UInt32, start)
+    state = seed * 2654435761 + 12345
+    if indices is None:
+        idx = dr.arange(mi.UInt32, count) + dr.opaque(mi.UInt32, start)
+        # streams differ per sample index and per seed; opaque seeds keep the compiled kernel reusable
+        rng = mi.PCG32(count, initstate=dr.opaque(mi.UInt64, state), initseq=mi.UInt64(idx))
+    else:
+        # PCG32 adds each lane's number to its state and stream; take it off again, so that sample i gets the
+        # generator it gets in the contiguous call from `start` (the same random numbers, whatever the subset)
+        count = len(indices)
+        ind = np.asarray(indices, np.int64)
+        lane = np.arange(count, dtype=np.int64)
+        idx = mi.UInt32(ind.astype(np.uint32))
+        rng = mi.PCG32(count, initstate=mi.UInt64((state + ind - start - lane).astype(np.uint64)),
+                       initseq=mi.UInt64((2 * ind - start - lane).astype(np.uint64)))
     pix = idx // dr.opaque(mi.UInt32, spp)
-    # streams differ per sample index and per seed; opaque seeds keep the compiled kernel reusable
-    rng = mi.PCG32(count, initstate=dr.opaque(mi.UInt64, seed * 2654435761 + 12345), initseq=mi.UInt64(idx))
     sx, sy = rng.next_float32(), rng.next_float32()
     lx, ly = rng.next_float32(), rng.next_float32()
     n = int(math.isqrt(spp))
