@@ -124,7 +124,7 @@ def trace_range(fs: FrameScene, spp: int, seed: int, start: int, count: int, **k
         sel = np.flatnonzero(slot == k)
         if len(sel) == 0:
             continue
-        part = trace(fk, spp, seed, start, len(sel), indices=idx[sel], **kw)
+        part = trace(fk, spp, seed, start, len(sel), **{**kw, "indices": idx[sel]})
         if out is None:
             out = {name: np.zeros((count,) + v.shape[1:], v.dtype) for name, v in part.items()}
         for name, v in part.items():
@@ -138,9 +138,10 @@ REFERENCE_FIELDS = ("diffuse", "specular", "emission", "groups", "hit", "obj", "
 
 def trace(fs: FrameScene, spp: int, seed: int, start: int, count: int, max_depth: int = 4,
           fields: tuple | None = None, stratified: bool = False, through_specular: bool = False,
-          indices: np.ndarray | None = None) -> dict:
+          indices: np.ndarray | None = None, chunk: int | None = None) -> dict:
     """Samples start..start+count-1 of the frame (sample i belongs to pixel i // spp), or the samples `indices` of
-    that range, as numpy arrays (with the random numbers they get in the whole range).
+    that range, as numpy arrays, with the random numbers they get in the whole range, or with `chunk`, in the
+    calls of `chunk` samples from `start` that cover it (one call then does the work of many, as before).
 
     fields: the outputs to return besides pixel/sx/sy (default: all); references need only REFERENCE_FIELDS.
     stratified: the pixel and lens positions jittered in a pixel's n x n strata (n = floor(sqrt(spp)), the lens
@@ -157,19 +158,22 @@ def trace(fs: FrameScene, spp: int, seed: int, start: int, count: int, max_depth
     spec = fs.spec
     W, H = spec.width, spec.height
     state = seed * 2654435761 + 12345
-    if indices is None:
+    if indices is None and chunk is None:
         idx = dr.arange(mi.UInt32, count) + dr.opaque(mi.UInt32, start)
         # streams differ per sample index and per seed; opaque seeds keep the compiled kernel reusable
         rng = mi.PCG32(count, initstate=dr.opaque(mi.UInt64, state), initseq=mi.UInt64(idx))
     else:
         # PCG32 adds each lane's number to its state and stream; take it off again, so that sample i gets the
-        # generator it gets in the contiguous call from `start` (the same random numbers, whatever the subset)
-        count = len(indices)
-        ind = np.asarray(indices, np.int64)
+        # generator it gets in the contiguous call from `start` (or from its chunk's start): the same random
+        # numbers, whatever the subset and however many calls
+        ind = np.arange(start, start + count, dtype=np.int64) if indices is None else np.asarray(indices, np.int64)
+        count = len(ind)
+        first = start if chunk is None else start + (ind - start) // chunk * chunk
         lane = np.arange(count, dtype=np.int64)
         idx = mi.UInt32(ind.astype(np.uint32))
-        rng = mi.PCG32(count, initstate=mi.UInt64((state + ind - start - lane).astype(np.uint64)),
-                       initseq=mi.UInt64((2 * ind - start - lane).astype(np.uint64)))
+        offset = (ind - first - lane).astype(np.uint64)   # >= 0: a sample's index is at least its lane's
+        rng = mi.PCG32(count, initstate=mi.UInt64(np.uint64(state % 2 ** 64) + offset),
+                       initseq=mi.UInt64((2 * ind - first - lane).astype(np.uint64)))
     pix = idx // dr.opaque(mi.UInt32, spp)
     sx, sy = rng.next_float32(), rng.next_float32()
     lx, ly = rng.next_float32(), rng.next_float32()
