@@ -388,6 +388,23 @@ def test_a_family_scene_renders(tmp_path):
         assert img.num_bins > 0
 
 
+def test_one_trace_call_gives_each_chunk_its_own_random_numbers():
+    """trace(..., chunk=c) over a range gives every sample the random numbers of its own c-sample call (Dr.Jit's
+    PCG32 seeds by lane, so this is what keeps references byte-identical with fewer calls), and a subset of a
+    range (`indices`, motion blur's instants) those of the whole range."""
+    from ranad_core.synth.trace import trace
+
+    fs = load_frame(make_scene(1, "glass", 24, 1), 0)
+    parts = [trace(fs, 64, 3, s0, min(1000, 3500 - s0)) for s0 in range(0, 3500, 1000)]
+    whole = trace(fs, 64, 3, 0, 3500, chunk=1000)
+    for k in ("sx", "diffuse", "z", "obj"):
+        np.testing.assert_array_equal(whole[k], np.concatenate([p[k] for p in parts]))
+    pick = np.arange(1000, 2000, 7)
+    sub = trace(fs, 64, 3, 1000, 0, indices=pick)
+    np.testing.assert_array_equal(sub["diffuse"], parts[1]["diffuse"][pick - 1000])
+    assert not np.array_equal(trace(fs, 64, 3, 0, 3500)["sx"], whole["sx"])   # the seeding is what differs
+
+
 def _frozen(spec, dt):
     """`spec` without motion blur, every object and the camera where they are `dt` frames after frame 0."""
     import copy
