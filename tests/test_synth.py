@@ -403,6 +403,9 @@ def test_one_trace_call_gives_each_chunk_its_own_random_numbers():
     sub = trace(fs, 64, 3, 1000, 0, indices=pick)
     np.testing.assert_array_equal(sub["diffuse"], parts[1]["diffuse"][pick - 1000])
     assert not np.array_equal(trace(fs, 64, 3, 0, 3500)["sx"], whole["sx"])   # the seeding is what differs
+    big = 4_000_000_000   # a scene seed (uint32) whose PCG state passes 2^63: the subset path overflowed int64
+    np.testing.assert_array_equal(trace(fs, 4, big, 0, 0, indices=np.arange(0, 300, 3))["sx"],
+                                  trace(fs, 4, big, 0, 300)["sx"][::3])
 
 
 def _frozen(spec, dt):
