@@ -57,10 +57,6 @@ class SceneSpec:
     media: list = field(default_factory=list)   # participating media (Medium), static
     shutter: float = 0.0          # motion blur: the shutter stays open this fraction of a frame (0: none)
 
-    def medium(self, oid: int) -> "Medium | None":
-        return next((m for m in self.media if m.id == oid), None)
-
-
     def object(self, oid: int) -> SceneObject:
         return next(o for o in self.objects if o.id == oid)
 
@@ -414,8 +410,9 @@ def make_scene(seed: int, preset: str = "medium", size: int = 128, frames: int =
         add("rectangle", leaf, base, cutout=CUTOUT_LEAF, spin=float(rng.uniform(-25, 25) * m))
     if family:
         _family_extras(spec, p, rng, add, cam_o, cam_t, m)
-        if p["sky"] >= 1 or (p["sky"] > 0 and rng.random() < p["sky"]):   # the sky is the key light group;
-            # the other groups keep their area lights
+        # a sky (always at sky 1, else in that share of the scenes) is the key light group; the other groups keep
+        # their area lights
+        if p["sky"] >= 1 or (p["sky"] > 0 and rng.random() < p["sky"]):
             spec.sky = _draw_sky(rng, 0)
             spec.light_groups[0] = "sky"
     if family and p["media"][1] > 0:
@@ -477,8 +474,9 @@ WALL = 3.5   # the interior family's walls: the back wall at z = -WALL, the side
 
 
 def _family_extras(spec: SceneSpec, p: dict, rng: np.random.Generator, add, cam_o, cam_t, m: float) -> None:
-    """The geometry axes only families draw: fences, stacks of semi-transparent layers, thin glass sheets, walls
-    (families without walls draw nothing for them, so their scenes are as before)."""
+    """The geometry axes only families draw: fences, stacks of semi-transparent layers, thin glass sheets, walls,
+    blob and torus meshes (families without walls or meshes draw nothing for them, so their scenes are as
+    before)."""
     for _ in range(int(rng.integers(*p["fences"], endpoint=True))):  # fences: a grid of bars cut out of a card
         pos = [rng.uniform(-2.0, 2.0), rng.uniform(0.4, 1.0), rng.uniform(-1.0, 3.0)]
         base = translate(pos) @ rotate([0, 1, 0], rng.uniform(-60, 60)) @ scale([rng.uniform(0.6, 1.6),
@@ -509,15 +507,15 @@ def _family_extras(spec: SceneSpec, p: dict, rng: np.random.Generator, add, cam_
             add("rectangle", _material(rng, dict(diffuse=2, textured=1), (1, 4)), base, vel=np.zeros(3))
     if p["meshes"][1] > 0:   # blobs and tori standing on the ground
         for _ in range(int(rng.integers(*p["meshes"], endpoint=True))):
-            s = rng.uniform(0.3, 0.7)
+            size = rng.uniform(0.3, 0.7)
             if rng.random() < 0.7:
                 mesh = {"kind": "blob", "seed": int(rng.integers(1 << 31)), "waves": int(rng.integers(3, 9)),
                         "amplitude": float(rng.uniform(0.1, 0.45))}
-                lift, shape = s * (1 + mesh["amplitude"]), scale(s)
+                lift, shape = size * (1 + mesh["amplitude"]), scale(size)
             else:
                 mesh = {"kind": "torus", "minor": float(rng.uniform(0.2, 0.5))}
-                shape = rotate(rng.normal(size=3), rng.uniform(0, 180)) @ scale(s)
-                lift = s * (1 + mesh["minor"])
+                shape = rotate(rng.normal(size=3), rng.uniform(0, 180)) @ scale(size)
+                lift = size * (1 + mesh["minor"])
             base = translate([rng.uniform(-2.2, 2.2), lift, rng.uniform(-2.0, 2.0)]) @ shape
             add("mesh", _material(rng, p["materials"], p["tex_freq"]), base, spin=float(rng.uniform(-15, 15) * m),
                 mesh=mesh)
