@@ -53,13 +53,41 @@ def test_flattened_reference_matches_mitsuba_path_tracer():
     assert np.all(np.abs(a - b).mean(-1)[lit] <= 0.08 * b.mean(-1)[lit] + 0.01 * b.mean())
 
 
-def _sky_only(seed):
-    """An exterior scene reduced to what Mitsuba's own integrator renders the same way: the sky as the only light,
-    no semi-transparent or cut-out surfaces (ranad's stochastic pass-through is its own) and no glass (seen
-    through glass, ranad's 4 bounces fall up to 25% short of Mitsuba's in places, with area lights as well)."""
-    spec = make_scene(seed, "exterior", 32, 1)
-    spec.objects = [o for o in spec.objects if o.radiance is None and o.opacity == 1.0 and o.cutout == 0
+def _mitsuba_comparable(spec):
+    """`spec` without what Mitsuba's own integrators render differently: semi-transparent and cut-out surfaces
+    (ranad's stochastic pass-through is its own) and glass (seen through glass, ranad's 4 bounces fall up to 25%
+    short of Mitsuba's in places, with area lights as well)."""
+    spec.objects = [o for o in spec.objects if o.opacity == 1.0 and o.cutout == 0
                     and "dielectric" not in o.bsdf.get("bsdf", o.bsdf)["type"]]
+    return spec
+
+
+def _between_mitsuba_depths(spec, ref, integrator, extra=None):
+    """Asserts that 8x8 block means of ranad's flattened reference `ref` lie between those of Mitsuba's
+    `integrator` at max_depth 4 and 5 (ranad keeps every path of up to 4 segments and the light-sampled share of
+    5-segment ones), within 5% + 1% of the mean, and their mean within 2%; `extra`: shapes added to Mitsuba's
+    scene. The upper bound's blocks are returned."""
+    import mitsuba as mi
+
+    blocks = lambda im: im.reshape(4, 8, 4, 8, 3).mean((1, 3)).mean(-1)  # noqa: E731
+    a = blocks(ref.flatten()[..., :3].astype(np.float64))
+    theirs = []
+    for max_depth in (4, 5):
+        d = convert_transforms(mitsuba_dict(spec, 0))
+        d["integrator"] = {"type": integrator, "max_depth": max_depth, "hide_emitters": spec.sky is not None}
+        d.update(extra or {})
+        theirs.append(blocks(np.asarray(mi.render(mi.load_dict(d), spp=512, seed=9), dtype=np.float64)[..., :3]))
+    lo, hi = np.minimum(*theirs), np.maximum(*theirs)
+    assert lo.mean() * 0.98 <= a.mean() <= hi.mean() * 1.02
+    tol = 0.05 * hi + 0.01 * hi.mean()
+    assert np.all((a >= lo - tol) & (a <= hi + tol))
+    return hi
+
+
+def _sky_only(seed):
+    """An exterior scene Mitsuba renders the same way (_mitsuba_comparable) with the sky as the only light."""
+    spec = _mitsuba_comparable(make_scene(seed, "exterior", 32, 1))
+    spec.objects = [o for o in spec.objects if o.radiance is None]
     spec.light_groups = ["sky"]
     return spec
 
@@ -71,25 +99,12 @@ def test_sky_lit_reference_matches_mitsuba_path_tracer(seed):
     (ranad leaves camera misses empty); seed 6 draws an overcast sky, seed 4 one with a sun. ranad's paths hold
     every path of up to 4 segments and the light-sampled share of 5-segment ones, so its block means must lie
     between Mitsuba's at max_depth 4 and 5 (they differ by up to 13% on this scene's metal ground)."""
-    import mitsuba as mi
-
     spec = _sky_only(seed)
     assert spec.sky is not None and (spec.sky.sun_dir is None) == (seed == 6)
     fs = load_frame(spec, 0)
     _, lay, _ = render_noisy(spec, 0, 64, "oid", 1, fs)   # enough samples that horizon pixels get bins
     [(ref, _)] = render_reference(spec, 0, 512, [lay], 3, fs)
-    blocks = lambda im: im.reshape(4, 8, 4, 8, 3).mean((1, 3)).mean(-1)  # noqa: E731
-    a = blocks(ref.flatten()[..., :3].astype(np.float64))
-    lo, hi = [], []
-    for depth, out in ((4, lo), (5, hi)):
-        d = convert_transforms(mitsuba_dict(spec, 0))
-        d["integrator"] = {"type": "path", "max_depth": depth, "hide_emitters": True}
-        out.append(blocks(np.asarray(mi.render(mi.load_dict(d), spp=512, seed=9), dtype=np.float64)[..., :3]))
-    lo, hi = np.minimum(lo[0], hi[0]), np.maximum(lo[0], hi[0])
-    assert hi.mean() > 0.05
-    assert lo.mean() * 0.98 <= a.mean() <= hi.mean() * 1.02
-    tol = 0.05 * hi + 0.01 * hi.mean()
-    assert np.all((a >= lo - tol) & (a <= hi + tol))
+    assert _between_mitsuba_depths(spec, ref, "path").mean() > 0.05
     # the sky is light group 0: every bin's diffuse + specular is in it
     grp = cols(ref, [f"lg_sky.{c}" for c in "RGB"])
     parts = sum(cols(ref, [f"{k}.{c}" for c in "RGB"]) for k in ("diffuse", "specular", "emission"))
@@ -102,13 +117,9 @@ def test_fog_reference_matches_mitsuba_volume_path_tracer(seed, depth):
     transmittance on every shadow ray, against Mitsuba's `volpath` with the same homogeneous medium in a null-
     bounded sphere (block means between its max_depth 4 and 5, as for surfaces); seed 3 is lit by area lights,
     seed 2 by a sky (hidden from the camera in both renderers), optical depths 2 and 4 across the sphere."""
-    import mitsuba as mi
-
     from ranad_core.synth.scene import Medium
 
-    spec = make_scene(seed, "fog", 32, 1)
-    spec.objects = [o for o in spec.objects if o.opacity == 1.0 and o.cutout == 0
-                    and "dielectric" not in o.bsdf.get("bsdf", o.bsdf)["type"]]
+    spec = _mitsuba_comparable(make_scene(seed, "fog", 32, 1))
     m0 = spec.media[0]
     r = float(np.mean(m0.radii))   # Mitsuba's spheres take no non-uniform scale
     spec.media = [Medium(m0.id, m0.centre, (r, r, r), depth / (2 * r), m0.albedo)]
@@ -118,20 +129,10 @@ def test_fog_reference_matches_mitsuba_volume_path_tracer(seed, depth):
     [(ref, _)] = render_reference(spec, 0, 512, [lay], 3, fs)
     thick = ref.channel("ZBack") > ref.channel("Z")
     assert thick.sum() > 20 and (ref.ids["id"][thick] == m0.id).all()
-    blocks = lambda im: im.reshape(4, 8, 4, 8, 3).mean((1, 3)).mean(-1)  # noqa: E731
-    a = blocks(ref.flatten()[..., :3].astype(np.float64))
-    lo, hi = [], []
-    for max_depth, out in ((4, lo), (5, hi)):
-        d = convert_transforms(mitsuba_dict(spec, 0))
-        d["integrator"] = {"type": "volpath", "max_depth": max_depth, "hide_emitters": spec.sky is not None}
-        d["fog"] = {"type": "sphere", "center": list(m0.centre), "radius": r, "bsdf": {"type": "null"},
-                    "interior": {"type": "homogeneous", "sigma_t": spec.media[0].sigma_t,
-                                 "albedo": {"type": "rgb", "value": list(m0.albedo)}, "phase": {"type": "isotropic"}}}
-        out.append(blocks(np.asarray(mi.render(mi.load_dict(d), spp=512, seed=9), dtype=np.float64)[..., :3]))
-    lo, hi = np.minimum(lo[0], hi[0]), np.maximum(lo[0], hi[0])
-    assert lo.mean() * 0.98 <= a.mean() <= hi.mean() * 1.02
-    tol = 0.05 * hi + 0.01 * hi.mean()
-    assert np.all((a >= lo - tol) & (a <= hi + tol))
+    fog = {"type": "sphere", "center": list(m0.centre), "radius": r, "bsdf": {"type": "null"},
+           "interior": {"type": "homogeneous", "sigma_t": spec.media[0].sigma_t,
+                        "albedo": {"type": "rgb", "value": list(m0.albedo)}, "phase": {"type": "isotropic"}}}
+    _between_mitsuba_depths(spec, ref, "volpath", {"fog": fog})
 
 
 def test_fog_scenes_write_volume_bins(tmp_path):

@@ -120,9 +120,10 @@ def layout_from_samples(s: dict, width: int, height: int, kind: str,
     return lay, sample_bin
 
 
-def _subset(lay: BinLayout, keep: np.ndarray) -> BinLayout:
-    """The bins `keep` (bool [B]) of a layout, in their order (a pixel's bins stay front to back)."""
-    return BinLayout(lay.width, lay.height, lay.pixel[keep], lay.obj[keep], lay.zmin[keep], lay.zmax[keep], lay.kind)
+def _subset(lay: BinLayout, keep: np.ndarray, kind: str) -> BinLayout:
+    """The bins `keep` (bool [B]) of a layout, in their order (a pixel's bins stay front to back), matched by
+    `kind`'s rule."""
+    return BinLayout(lay.width, lay.height, lay.pixel[keep], lay.obj[keep], lay.zmin[keep], lay.zmax[keep], kind)
 
 
 def assign_to_layout(s: dict, lay: BinLayout) -> np.ndarray:
@@ -136,9 +137,7 @@ def assign_to_layout(s: dict, lay: BinLayout) -> np.ndarray:
         vol = s["volume"] if "volume" in s else np.zeros(len(s["hit"]), bool)
         for is_vol in (False, True):
             keep = lay.volume == is_vol
-            sub = _subset(lay, keep)
-            if is_vol:
-                sub.kind = "oid"
+            sub = _subset(lay, keep, "oid" if is_vol else "z")
             part = assign_to_layout({**s, "hit": s["hit"] & (vol == is_vol)}, sub)
             ok = part >= 0
             out[ok] = np.flatnonzero(keep)[part[ok]]

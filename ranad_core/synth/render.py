@@ -45,7 +45,7 @@ def add_motion(spec: SceneSpec, frame: int, s: dict) -> None:
         for k, dt in enumerate(shutter_offsets(spec)):
             for oid in np.unique(s["obj"][s["hit"] & (s["slot"] == k)]):
                 o = objects.get(int(oid))
-                if o is None or dt == 0:   # media do not move
+                if o is None:   # media do not move
                     continue
                 sel = s["hit"] & (s["slot"] == k) & (s["obj"] == oid)
                 m = pose_at(spec, o, frame, 0.0) @ np.linalg.inv(pose_at(spec, o, frame, dt))
