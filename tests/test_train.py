@@ -539,6 +539,37 @@ def test_a_reconstruction_grown_by_a_scale_starts_from_the_init():
         grown_reconstruction({k: v for k, v in old.items() if k != "embed.0.bias"}, old, "x")
 
 
+def test_a_one_unet_config_starts_from_a_two_unet_models_first_unet(tmp_path):
+    """cpu-small-pdl-gza-u1 from the two-U-Net default: it denoises exactly as the default does with its second
+    U-Net skipped (the oracle: the loaded default with its backbone cut to the first U-Net), and a two-U-Net
+    config refuses a one-U-Net init."""
+    import copy
+
+    from ranad_core.denoise import denoise_frame
+    from ranad_core.model import RaNAD, feature_dim, get_config
+    from ranad_core.model.store import DEFAULT_MODEL, load_model
+    from ranad_core.train.trainer import init_single
+
+    model = RaNAD(get_config("cpu-small-pdl-gza-u1"), feature_dim("prior")).eval()
+    init_single(model, DEFAULT_MODEL)
+    cut = copy.deepcopy(load_model(DEFAULT_MODEL).model)
+    assert cut.config.unets == 2
+    cut.backbone.unets = cut.backbone.unets[:1]
+    img = read_deep(Path(__file__).resolve().parents[1] / "examples" / "synth_shot" / "noisy_spp16.0001.exr")
+    a, b = denoise_frame(cut, img).image, denoise_frame(model, img).image
+    assert np.allclose(a.values, b.values, rtol=1e-5, atol=1e-6)
+    full = denoise_frame(load_model(DEFAULT_MODEL).model, img).image
+    assert not np.allclose(full.values, b.values, rtol=1e-3, atol=1e-4)   # the second U-Net did matter
+    from safetensors.torch import save_file
+
+    path = tmp_path / "u1.safetensors"
+    save_file({k: v.contiguous() for k, v in model.state_dict().items()}, str(path),
+              metadata={"model_config": json.dumps(model.config.to_dict())})
+    two = RaNAD(get_config("cpu-small-pdl-gza"), feature_dim("prior"))
+    with pytest.raises(RanadError, match="does not match"):
+        init_single(two, str(path))
+
+
 def test_cross_frame_init_must_share_the_spatial_models_dropout(tmp_path):
     """A sequence config on the lattice bin dropout refuses a spatial init trained without it (the weights would
     load, the U-Nets would see other bins than they were trained on), and one with the layer gate an init without

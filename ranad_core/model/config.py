@@ -177,6 +177,11 @@ CONFIGS["cpu-small-pdl-gall"] = ModelConfig(**{**CONFIGS["cpu-small-pdl"].__dict
 CONFIGS["cpu-small-pdl-gza-xg"] = ModelConfig(**{**CONFIGS["cpu-small-pdl-xg"].__dict__, "name": "cpu-small-pdl-gza-xg",
                                                 "layer_gate": ("depth", "alpha")})
 
+# cpu-small-pdl-gza with one U-Net: the backbone is about 40% of a frame's time and the second U-Net half of it
+# (issue 27); started from a two-U-Net model's first U-Net (train.trainer.init_single) and fine-tuned
+CONFIGS["cpu-small-pdl-gza-u1"] = ModelConfig(**{**CONFIGS["cpu-small-pdl-gza"].__dict__,
+                                                "name": "cpu-small-pdl-gza-u1", "unets": 1})
+
 
 def get_config(name: str) -> ModelConfig:
     try:

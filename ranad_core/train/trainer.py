@@ -197,21 +197,28 @@ def unwrap(net):
 def init_single(model, init_name: str) -> None:
     """Starts single-frame `model` from single-frame weights `init_name` of the same architecture, also when the
     feature sets differ (the new feature columns start at zero, so the model begins as the old one would on its
-    shared inputs)."""
+    shared inputs), or when the init has more U-Nets (its first ones kept: the backbone's residual stream read
+    after fewer U-Nets, an early exit that fine-tuning then adapts the reconstructions to)."""
     from ..model.inputs import old_columns
     from ..model.store import load_model
 
     init = load_model(init_name).model
     a, b = init.config, model.config
-    if a.window > 1 or (a.dim, a.unets, a.levels, a.heads, a.head_dim) != (b.dim, b.unets, b.levels, b.heads,
-                                                                            b.head_dim):
+    if a.window > 1 or (a.dim, a.levels, a.heads, a.head_dim) != (b.dim, b.levels, b.heads, b.head_dim) \
+            or a.unets < b.unets:
         raise RanadError(f"--init model {a.name!r} does not match config {b.name!r}", init_name)
-    state = init.state_dict()
+    state = {k: v for k, v in init.state_dict().items() if not _dropped_unet(k, b.unets)}
     w = state["embed.0.weight"]
     new = w.new_zeros(w.shape[0], model.embed[0].in_features)
     new[:, old_columns(a.features, b.features)] = w
     state["embed.0.weight"] = new
     model.load_state_dict(grown_reconstruction(state, model.state_dict(), init_name))
+
+
+def _dropped_unet(key: str, unets: int) -> bool:
+    """Whether weight `key` belongs to a backbone U-Net at index `unets` or later."""
+    parts = key.split(".")
+    return parts[:2] == ["backbone", "unets"] and int(parts[2]) >= unets
 
 
 # a new scale's share of the mix when a reconstruction starts from one with fewer scales: softmax logit below the
