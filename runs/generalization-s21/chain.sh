@@ -6,7 +6,7 @@ cd /work/data
 R=/work/main/runs
 W=/work/main/ranad_core/weights
 while pgrep -f "synth -o train_g31_new" > /dev/null; do sleep 10; done
-( time ranad synth -o train_g31_new --scenes 24 --size 128 --frames 1 --spp 4,16,64,128 --ref-spp 1024 --seed 31 \
+( time ranad synth -o train_g31_new --scenes 36 --size 128 --frames 1 --spp 4,16,64,128 --ref-spp 1024 --seed 31 \
     --workers 2 --preset exterior --preset organic --preset motion --sampler stratified --pixel-filter gaussian \
     --filter-width 1.5:4 ) > s21/synth_g31_finish.log 2>&1
 python /work/main/runs/generalization-s21/check_finite.py train_g31_new > s21/finite.log 2>&1 || exit 1
