@@ -81,7 +81,8 @@ def test_bad_shapes_are_refused():
                      torch.randn(10), True)
 
 
-@pytest.mark.parametrize("config", ["cpu-small-pd", "cpu-small", "cpu-small-pdl-gall"])
+@pytest.mark.parametrize("config", ["cpu-small-pd", "cpu-small", "cpu-small-pdl-gall", "cpu-small-pdl-gza",
+                                    "cpu-small-pdr"])
 def test_model_output_equals_the_plain_modules(config, monkeypatch):
     """A whole single-frame model (input embedding, both U-Nets, every reconstruction) with and without the fused
     path, on the bundled frame: the same output to float rounding, and the path was taken."""

@@ -38,6 +38,83 @@ def test_kernel_cache_folder_follows_the_environment(monkeypatch, tmp_path):
     assert folder.parent.name.startswith(f"py{sys.version_info[0]}{sys.version_info[1]}_torch")
 
 
+
+def test_the_build_compiles_the_staged_copy_of_the_sources():
+    """The loaded kernels were compiled from the build folder's copy of the sources, not from this checkout's path:
+    another install's path would otherwise make torch's build file differ and rebuild the shared build."""
+    from ranad_core.rana import extension
+
+    ext = extension.load_cpu_extension()
+    folder = Path(ext.__file__).parent
+    ninja = (folder / "build.ninja").read_text()
+    assert str(folder / extension.STAGED / "rana_cpu.cpp") in ninja
+    assert str(extension.SOURCE_DIR) not in ninja
+    for name in extension.CPU_SOURCES + extension.CPU_HEADERS:
+        assert (folder / extension.STAGED / name).read_bytes() == (extension.SOURCE_DIR / name).read_bytes()
+
+
+def test_staged_sources_are_written_only_when_they_differ(tmp_path):
+    from ranad_core.rana import extension
+
+    names = extension.CPU_SOURCES + extension.CPU_HEADERS
+    src = extension.staged_sources(tmp_path, names)
+    first = {n: (src / n).stat().st_mtime_ns for n in names}
+    (src / "rows_cpu.h").write_text("// edited")
+    extension.staged_sources(tmp_path, names)
+    assert (src / "rows_cpu.h").read_bytes() == (extension.SOURCE_DIR / "rows_cpu.h").read_bytes()
+    assert all((src / n).stat().st_mtime_ns == first[n] for n in names if n != "rows_cpu.h")
+    assert sorted(p.name for p in src.iterdir()) == sorted(names)   # no temporary file left
+
+
+HOLDER = """
+import sys, time
+from pathlib import Path
+from ranad_core.rana.extension import build_lock
+with build_lock(Path(sys.argv[1])):
+    print("held", flush=True)
+    time.sleep(float(sys.argv[2]))
+"""
+
+
+def _holder(folder: Path, seconds: float) -> subprocess.Popen:
+    p = subprocess.Popen([sys.executable, "-c", HOLDER, str(folder), str(seconds)], stdout=subprocess.PIPE,
+                         text=True, cwd=ROOT, env=dict(os.environ, PYTHONPATH=str(ROOT)))
+    assert p.stdout.readline().strip() == "held"
+    return p
+
+
+def test_a_killed_build_leaves_no_lock_behind(tmp_path):
+    """A build killed while it holds the lock (a farm job killed, Ctrl-C) and torch's lock file it left: the next
+    build takes the lock at once and removes the stale file (torch would wait for it for ever)."""
+    import fcntl
+
+    from ranad_core.rana import extension
+
+    holder = _holder(tmp_path, 600)
+    (tmp_path / extension.TORCH_LOCK).write_text("")
+    with open(tmp_path / extension.BUILD_LOCK) as f:
+        with pytest.raises(BlockingIOError):
+            fcntl.flock(f, fcntl.LOCK_EX | fcntl.LOCK_NB)   # held while the holder lives
+    holder.kill()
+    holder.wait()
+    with extension.build_lock(tmp_path):
+        assert not (tmp_path / extension.TORCH_LOCK).exists()
+
+
+def test_a_second_build_waits_for_the_first_and_says_so(tmp_path, capsys):
+    import time
+
+    from ranad_core.rana import extension
+
+    holder = _holder(tmp_path, 1.5)
+    t = time.perf_counter()
+    with extension.build_lock(tmp_path, "C++"):
+        waited = time.perf_counter() - t
+    holder.wait()
+    assert waited > 0.5
+    assert "waiting for another process building the C++ RaNA kernels" in capsys.readouterr().err
+
+
 SCRIPT = r"""
 import sys, torch
 import ranad_core

@@ -4,8 +4,12 @@ Built on first use (with a message on stderr: it takes a minute or two) and cach
 milliseconds. The cache folder is ``$RANAD_KERNEL_CACHE`` when set (a folder a render farm shares), else torch's
 (``$TORCH_EXTENSIONS_DIR``, default ``~/.cache/torch_extensions``). The build is tuned for the CPU it runs on
 (``-march=native``); the extension name carries a hash of the CPU's feature flags and of the sources, so a shared
-cache holds one build per CPU type and version and never hands a binary to a CPU that cannot run it. The build
-key holds no paths, so installs in different places share it.
+cache holds one build per CPU type and version and never hands a binary to a CPU that cannot run it. The sources
+are compiled from a copy inside the build folder, so no install's path enters the build: installs in different
+places share one build (compiled from their own paths, each would make the other's look out of date and rebuild it).
+
+Builds of one folder take turns under a lock the system releases when its holder dies: a build interrupted (Ctrl-C, a
+farm job killed) leaves no lock behind that would make every later run wait for ever, as torch's own lock file would.
 
 The sources are the package's ``kernels`` folder in an installed wheel (pyproject.toml ships ``cuda/`` there), or
 the source tree's ``cuda/`` in a checkout or an editable install.
@@ -14,6 +18,7 @@ When no compiler is available or the build fails, a warning says so once and cal
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import os
 import shutil
@@ -85,10 +90,10 @@ def build_folder(name: str) -> Path:
     return Path(root).expanduser() / abi / name
 
 
-def _build(what: str, name: str, sources, **kwargs):
-    """torch's JIT build of `sources` into build_folder(name) (reused when built before); any failure becomes
-    BuildUnavailable with its first error. The headers are found beside the sources (quoted includes), so no
-    path enters torch's build key."""
+def _build(what: str, name: str, sources, headers, **kwargs):
+    """torch's JIT build of `sources` into build_folder(name) (reused when built before), from their copy in the
+    folder (`staged_sources`), under the folder's build lock (`build_lock`); any failure becomes BuildUnavailable
+    with its first error."""
     import sys
 
     from torch.utils.cpp_extension import load
@@ -96,15 +101,61 @@ def _build(what: str, name: str, sources, **kwargs):
     try:
         folder = build_folder(name)
         folder.mkdir(parents=True, exist_ok=True)
-        if not (folder / f"{name}.so").is_file():
-            print(f"ranad: building the {what} RaNA kernels for this machine (once per CPU type and version, a "
-                  f"minute or two) in {folder}", file=sys.stderr, flush=True)
-        return load(name=name, sources=[str(SOURCE_DIR / n) for n in sources], build_directory=str(folder),
-                    verbose=False, **kwargs)
+        with build_lock(folder, what):
+            src = staged_sources(folder, tuple(sources) + tuple(headers))
+            if not (folder / f"{name}.so").is_file():
+                print(f"ranad: building the {what} RaNA kernels for this machine (once per CPU type and version, a "
+                      f"minute or two) in {folder}", file=sys.stderr, flush=True)
+            return load(name=name, sources=[str(src / n) for n in sources], build_directory=str(folder),
+                        verbose=False, **kwargs)
     except Exception as e:  # noqa: BLE001 - any build failure means: use the reference
         lines = str(e).strip().splitlines() or ["unknown error"]
         first_error = next((ln for ln in lines if "error" in ln.lower()), lines[-1])
         raise BuildUnavailable(f"building the {what} RaNA kernels failed: {first_error.strip()}") from e
+
+
+STAGED = "src"            # the build folder's copy of the sources
+TORCH_LOCK = "lock"        # torch's lock file in a build folder (cpp_extension's FileBaton)
+BUILD_LOCK = "ranad.lock"  # ours: flock'ed, so released with the process that holds it
+
+
+@contextlib.contextmanager
+def build_lock(folder: Path, what: str = "C++"):
+    """Holds the build folder's lock (fcntl.flock on BUILD_LOCK, waited for with a message when another process
+    holds it). Every ranad build of the folder runs under it, so a torch lock file found while holding it was left
+    by a build that died, and is removed: torch would otherwise wait for it for ever."""
+    import fcntl
+    import sys
+
+    with open(folder / BUILD_LOCK, "a") as f:
+        try:
+            fcntl.flock(f, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            print(f"ranad: waiting for another process building the {what} RaNA kernels in {folder}", file=sys.stderr,
+                  flush=True)
+            fcntl.flock(f, fcntl.LOCK_EX)
+        try:
+            (folder / TORCH_LOCK).unlink(missing_ok=True)
+            yield
+        finally:
+            fcntl.flock(f, fcntl.LOCK_UN)
+
+
+def staged_sources(folder: Path, names) -> Path:
+    """folder/STAGED holding `names` as in SOURCE_DIR (each rewritten, through a temporary file, only when it
+    differs; the folder's name carries the sources' digest, so normally they are written once): what the build
+    compiles, at the same path whichever install asks."""
+    dst = folder / STAGED
+    dst.mkdir(exist_ok=True)
+    for n in names:
+        data = (SOURCE_DIR / n).read_bytes()
+        target = dst / n
+        if target.is_file() and target.read_bytes() == data:
+            continue
+        tmp = dst / f".{n}.{os.getpid()}.tmp"
+        tmp.write_bytes(data)
+        os.replace(tmp, target)
+    return dst
 
 
 @lru_cache(maxsize=None)
@@ -115,7 +166,7 @@ def load_cpu_extension():
         raise BuildUnavailable("no C++ compiler on PATH (install g++ or set CXX)")
     flags = ["-O3", "-std=c++20", "-fopenmp", "-march=native", "-fno-math-errno", "-fno-trapping-math"]
     return _build("C++", f"ranad_rana_cpu_{_cpu_tag()}_{_sources_digest(CPU_SOURCES + CPU_HEADERS)}", CPU_SOURCES,
-                  extra_cflags=flags, extra_ldflags=["-fopenmp"])
+                  CPU_HEADERS, extra_cflags=flags, extra_ldflags=["-fopenmp"])
 
 
 @lru_cache(maxsize=None)
@@ -145,7 +196,7 @@ def load_cuda_extension():
     if not torch.cuda.is_available():
         raise BuildUnavailable("no CUDA device (or a CPU-only build of torch)")
     return _build("CUDA", f"ranad_rana_cuda_{_sources_digest(CUDA_SOURCES + CUDA_HEADERS)}", CUDA_SOURCES,
-                  extra_cflags=["-O3", "-std=c++20"],
+                  CUDA_HEADERS, extra_cflags=["-O3", "-std=c++20"],
                   extra_cuda_cflags=["-O3", "-std=c++20", "-Xptxas", "-warn-spills", "--expt-relaxed-constexpr"])
 
 
