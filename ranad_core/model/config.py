@@ -178,7 +178,9 @@ CONFIGS["cpu-small-pdl-gza-xg"] = ModelConfig(**{**CONFIGS["cpu-small-pdl-xg"]._
                                                 "layer_gate": ("depth", "alpha")})
 
 # cpu-small-pdl-gza with one U-Net: the backbone is about 40% of a frame's time and the second U-Net half of it
-# (issue 27); started from a two-U-Net model's first U-Net (train.trainer.init_single) and fine-tuned
+# (issue 27); started from a two-U-Net model's first U-Net (train.trainer.init_single) and fine-tuned. Measured, not
+# shipped: 0.73x the time of the two-U-Net default on the 1080p bench frame, 7-16% worse on held-out sets
+# (runs/generalization-s21, section 2)
 CONFIGS["cpu-small-pdl-gza-u1"] = ModelConfig(**{**CONFIGS["cpu-small-pdl-gza"].__dict__,
                                                 "name": "cpu-small-pdl-gza-u1", "unets": 1})
 
