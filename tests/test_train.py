@@ -545,6 +545,8 @@ def test_a_one_unet_config_starts_from_a_two_unet_models_first_unet(tmp_path):
     config refuses a one-U-Net init."""
     import copy
 
+    from safetensors.torch import save_file
+
     from ranad_core.denoise import denoise_frame
     from ranad_core.model import RaNAD, feature_dim, get_config
     from ranad_core.model.store import DEFAULT_MODEL, load_model
@@ -560,8 +562,6 @@ def test_a_one_unet_config_starts_from_a_two_unet_models_first_unet(tmp_path):
     assert np.allclose(a.values, b.values, rtol=1e-5, atol=1e-6)
     full = denoise_frame(load_model(DEFAULT_MODEL).model, img).image
     assert not np.allclose(full.values, b.values, rtol=1e-3, atol=1e-4)   # the second U-Net did matter
-    from safetensors.torch import save_file
-
     path = tmp_path / "u1.safetensors"
     save_file({k: v.contiguous() for k, v in model.state_dict().items()}, str(path),
               metadata={"model_config": json.dumps(model.config.to_dict())})
