@@ -302,6 +302,13 @@ FAMILY_PARAMS = {
     # its own time: streaks, edges of partial coverage), thin wires and foliage among them
     "motion": {**_NEW, "objects": (4, 8), "thin": (1, 3), "cards": (0, 3), "motion": 4.0, "shutter": (0.25, 1.0),
                "materials": dict(diffuse=3, textured=2, noise=1, roughplastic=2, roughconductor=1, dielectric=1)},
+    # seen through glass: one or two thin panes (windows, vitrines) between the camera and every scene, glassware
+    # (solid and rough dielectrics) among meshes in procedural albedo maps, under a sky or area lights. The
+    # refraction a training family shares with the held-out `glass` family, in scenes composed like `organic`'s
+    "windows": {**_NEW, "objects": (2, 5), "meshes": (1, 3), "glass_sheets": (1, 2), "cards": (0, 2), "sky": 0.5,
+                "small_lights": (0, 1),
+                "materials": dict(diffuse=2, noise=2, textured=1, roughplastic=1, conductor=1, roughconductor=1,
+                                  dielectric=2, roughdielectric=2, thindielectric=1)},
 }
 PRESET_PARAMS.update(FAMILY_PARAMS)
 PRESETS = ("easy", "medium", "deep-heavy")           # the original presets, used in turn by default
