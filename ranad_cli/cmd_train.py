@@ -52,6 +52,11 @@ def _spp_weight(text: str) -> tuple[int, float]:
               help="Share of crops shown without albedo/normal, so the model serves files that lack them.")
 @click.option("--p-no-split", default=0.2, show_default=True, type=click.FloatRange(0, 1),
               help="Share of crops shown without the diffuse/specular split (beauty only).")
+@click.option("--rotate-normals", "p_rotate_normals", default=0.0, show_default=True,
+              type=click.FloatRange(0, 1),
+              help="Share of crops whose normals are turned by a random rotation: renderers write normals in world "
+                   "space (for a camera facing any way) or in camera space, and ranad's scenes all face one way; "
+                   "the model should not depend on the space. 0 keeps earlier recipes' random draws.")
 @click.option("--window", default=3, show_default=True, type=click.IntRange(2, 7),
               help="Cross-frame configs (e.g. cpu-small-xf): frames per training window around the centre.")
 @click.option("--init", default=None,
@@ -84,9 +89,9 @@ def _spp_weight(text: str) -> tuple[int, float]:
                    "weigh 1), e.g. 64=2 to show clean renders twice as often, where the model over-smooths them.")
 @device_option("the model trains", " Crops are made on the CPU either way; data-parallel --processes run on the "
                "CPU.")
-def train_cmd(datasets, run, config, steps, crop, lr, seed, checkpoint_every, processes, p_no_aux, p_no_split, window,
-              init, temporal_weight, until, freeze_spatial, p_misalign, loss_weights, spp_weights,
-              device):
+def train_cmd(datasets, run, config, steps, crop, lr, seed, checkpoint_every, processes, p_no_aux, p_no_split,
+              p_rotate_normals, window, init, temporal_weight, until, freeze_spatial, p_misalign, loss_weights,
+              spp_weights, device):
     """Train on DATASETS (one or several outputs of `ranad synth`, their scenes pooled): centre-frame pairs,
     random crops, flips and transposes, SMAPE on the diffuse and specular bins and on the composited colour plus
     SSIM on it, L1 on alpha and depth. Resumes from RUN/checkpoint.pt when it exists."""
@@ -107,8 +112,8 @@ def train_cmd(datasets, run, config, steps, crop, lr, seed, checkpoint_every, pr
     cfg = TrainConfig(dataset=datasets[0] if len(datasets) == 1 else tuple(datasets), run=run, config=config,
                       steps=steps, crop=crop, lr=lr, seed=seed,
                       checkpoint_every=checkpoint_every, p_no_aux=p_no_aux, p_no_split=p_no_split,
-                      window=window, init=init, temporal_weight=temporal_weight, until=until,
-                      freeze_spatial=freeze_spatial, p_misalign=p_misalign,
+                      p_rotate_normals=p_rotate_normals, window=window, init=init, temporal_weight=temporal_weight,
+                      until=until, freeze_spatial=freeze_spatial, p_misalign=p_misalign,
                       loss_weights=weights, spp_weights=odds, device=run_on)
     if processes > 1:
         spawn_local(cfg, processes)

@@ -654,3 +654,55 @@ def test_training_skips_draws_with_a_non_finite_loss(tmp_path):
     _poison_reference(bad / "scene_0000", slice(None))
     r = CliRunner().invoke(cli, ["train", str(bad), "-o", str(tmp_path / "run2"), "--steps", "4", "--crop", "16"])
     assert r.exit_code == 2 and "not finite on 50 draws in a row" in r.output
+
+
+def test_normals_turned_by_a_rotation_keep_everything_else():
+    """rotated_normals turns every bin's normal by one rotation (lengths and the angles between bins kept, the
+    other channels untouched); random_rotation gives proper rotations; an image without normals is left as it is."""
+    from ranad_core.channels import NORMAL
+    from ranad_core.train.data import random_rotation, rotated_normals, without_aux
+
+    img = read_deep(SHOT / "noisy_spp16.0001.exr")
+    rng = np.random.default_rng(3)
+    rots = [random_rotation(rng) for _ in range(20)]
+    for rot in rots:
+        np.testing.assert_allclose(rot @ rot.T, np.eye(3), atol=1e-12)
+        assert np.linalg.det(rot) == pytest.approx(1.0)
+    assert np.abs(np.mean(rots, axis=0)).max() < 0.5    # not one fixed turn
+    out = rotated_normals(img, rots[0])
+    cols = [img.channels.index(c) for c in NORMAL]
+    n0, n1 = img.values[:, cols].astype(np.float64), out.values[:, cols].astype(np.float64)
+    np.testing.assert_allclose(n1, n0 @ rots[0].T, atol=2e-3)          # half-float channels
+    np.testing.assert_allclose(np.linalg.norm(n1, axis=1), np.linalg.norm(n0, axis=1), atol=2e-3)
+    pairs = np.random.default_rng(0).integers(0, img.num_bins, (200, 2))
+    np.testing.assert_allclose((n1[pairs[:, 0]] * n1[pairs[:, 1]]).sum(1), (n0[pairs[:, 0]] * n0[pairs[:, 1]]).sum(1),
+                               atol=4e-3)
+    others = [i for i in range(len(img.channels)) if i not in cols]
+    assert np.array_equal(out.values[:, others], img.values[:, others])
+    assert np.array_equal(out.offsets, img.offsets) and out.channels == img.channels
+    bare = without_aux(img)
+    assert rotated_normals(bare, rots[0]) is bare
+
+
+def test_rotate_normals_draws_only_when_asked(tmp_path):
+    """p_rotate 0 leaves the crop and the random stream as before the option (earlier recipes train the same);
+    p_rotate 1 turns the noisy crop's normals and not the reference; --rotate-normals reaches the train_config."""
+    from ranad_core.channels import NORMAL
+    from ranad_core.train.data import reduce_inputs
+
+    noisy = read_deep(SHOT / "noisy_spp16.0001.exr")
+    ref = read_deep(SHOT / "reference_spp16.0001.exr")
+    a, b = np.random.default_rng(5), np.random.default_rng(5)
+    n0, r0 = reduce_inputs(noisy, ref, a, 0.0, 0.0, 0.0)
+    b.random(), b.random()                     # the two draws reduce_inputs made before the option
+    assert n0 is noisy and r0 is ref and a.random() == b.random()
+    n1, r1 = reduce_inputs(noisy, ref, np.random.default_rng(5), 0.0, 0.0, 1.0)
+    cols = [noisy.channels.index(c) for c in NORMAL]
+    assert not np.allclose(n1.values[:, cols], noisy.values[:, cols], atol=0.05)
+    assert r1 is ref
+    ds = dataset_from_example(tmp_path / "ds")
+    run = tmp_path / "run"
+    r = CliRunner().invoke(cli, ["train", str(ds), "-o", str(run), "--steps", "2", "--crop", "16",
+                                 "--rotate-normals", "0.5"])
+    assert r.exit_code == 0, r.output
+    assert torch.load(run / "checkpoint.pt", weights_only=False)["train_config"]["p_rotate_normals"] == 0.5

@@ -201,14 +201,46 @@ def merged_split(img: DeepImage) -> DeepImage:
     return img.with_values(vals).select(keep)
 
 
+def random_rotation(rng: np.random.Generator) -> np.ndarray:
+    """A 3x3 rotation drawn uniformly (the Q of a Gaussian matrix's QR, its column signs fixed, det +1)."""
+    q, r = np.linalg.qr(rng.normal(size=(3, 3)))
+    q = q * np.sign(np.diag(r))
+    return q if np.linalg.det(q) > 0 else -q
+
+
+def rotated_normals(img: DeepImage, rot: np.ndarray) -> DeepImage:
+    """The image with every normal turned by `rot` (the other channels as they are; an image without normals as
+    it is). Renderers write normals in world space, for a camera facing any way, or in camera space, and a file
+    does not say which: a model shown its normals in one space only learns that space's directions (ranad's scenes
+    are all seen from one side, y up), so training turns them at random (`TrainConfig.p_rotate_normals`)."""
+    if not all(c in img.channels for c in NORMAL):
+        return img
+    cols = [img.channels.index(c) for c in NORMAL]
+    vals = img.values.copy()
+    vals[:, cols] = (vals[:, cols].astype(np.float64) @ np.asarray(rot, np.float64).T).astype(vals.dtype)
+    return img.with_values(vals)
+
+
+def normal_rotation(rng: np.random.Generator, p_rotate: float) -> np.ndarray | None:
+    """A random rotation for a crop's normals with probability p_rotate, else None; draws nothing at 0, so recipes
+    from before the option keep their random stream."""
+    if p_rotate <= 0 or rng.random() >= p_rotate:
+        return None
+    return random_rotation(rng)
+
+
 def reduce_inputs(noisy: DeepImage, ref: DeepImage, rng: np.random.Generator, p_no_aux: float,
-                  p_no_split: float) -> tuple:
+                  p_no_split: float, p_rotate: float = 0.0) -> tuple:
     """Randomly present a pair in the reduced modes `ranad denoise` supports (no albedo/normal; no
-    diffuse/specular split), so one model serves full and reduced inputs."""
+    diffuse/specular split), so one model serves full and reduced inputs; with p_rotate, its normals in another
+    space (rotated_normals)."""
     if rng.random() < p_no_aux:
         noisy = without_aux(noisy)
     if rng.random() < p_no_split:
         noisy, ref = merged_split(noisy), merged_split(ref)
+    rot = normal_rotation(rng, p_rotate)
+    if rot is not None:
+        noisy = rotated_normals(noisy, rot)
     return noisy, ref
 
 
@@ -310,10 +342,13 @@ def sample_consecutive(pairs: tuple, rng: np.random.Generator, crop: int, window
 
 
 def reduce_window(frames: list, ref: DeepImage, rng: np.random.Generator, p_no_aux: float,
-                  p_no_split: float) -> tuple:
-    """reduce_inputs for a window: the same reduction for every frame."""
+                  p_no_split: float, rot: np.ndarray | None = None) -> tuple:
+    """reduce_inputs for a window: the same reduction for every frame, and the same normal rotation `rot` (None:
+    none; normal_rotation draws one)."""
     if rng.random() < p_no_aux:
         frames = [without_aux(f) for f in frames]
     if rng.random() < p_no_split:
         frames, ref = [merged_split(f) for f in frames], merged_split(ref)
+    if rot is not None:
+        frames = [rotated_normals(f, rot) for f in frames]
     return frames, ref

@@ -19,8 +19,8 @@ import torch
 from ..errors import RanadError
 from ..fileutil import atomic_output
 from ..model import RaNAD, feature_dim, get_config, prepare
-from .data import (find_frame_pairs, find_pairs, frame_context, reduce_inputs, reduce_window, sample,
-                   sample_consecutive, sample_window)
+from .data import (find_frame_pairs, find_pairs, frame_context, normal_rotation, reduce_inputs, reduce_window,
+                   sample, sample_consecutive, sample_window)
 from .losses import temporal_loss, total_loss
 
 CHECKPOINT = "checkpoint.pt"
@@ -43,6 +43,7 @@ class TrainConfig:
     checkpoint_every: int = 200
     p_no_aux: float = 0.2         # share of crops shown without albedo/normal (reduced mode)
     p_no_split: float = 0.2       # share of crops shown without the diffuse/specular split (reduced mode)
+    p_rotate_normals: float = 0.0  # share of crops with their normals turned at random (data.rotated_normals)
     window: int = 3               # cross-frame configs: frames per training window (centre +- (window-1)/2)
     init: str | None = None       # cross-frame configs: single-frame weights to start from (model name/file/run)
     temporal_weight: float = 0.0  # cross-frame configs: weight of the temporal loss; > 0 trains on consecutive frames
@@ -258,14 +259,15 @@ def pair_loss(net, pair, rng: np.random.Generator, cfg: TrainConfig, cross: bool
     features, device = unwrap(net).config.features, model_device(net)
     if cross:
         frames, ref_img, centre, ctxs = sample_window(pair, rng, cfg.crop, cfg.window, features, cfg.p_misalign)
-        frames, ref_img = reduce_window(frames, ref_img, rng, cfg.p_no_aux, cfg.p_no_split)
+        frames, ref_img = reduce_window(frames, ref_img, rng, cfg.p_no_aux, cfg.p_no_split,
+                                        normal_rotation(rng, cfg.p_rotate_normals))
         window = [prepare(f, c.z_stats, features, c.scale).to(device) for f, c in zip(frames, ctxs)]
         noisy, ref = window[centre], prepare(ref_img).to(device)
         scale = ctxs[centre].scale
     else:
         ctx = frame_context(pair.noisy, features)
         noisy_img, ref_img = reduce_inputs(*sample(pair, rng, cfg.crop, features), rng, cfg.p_no_aux,
-                                           cfg.p_no_split)
+                                           cfg.p_no_split, cfg.p_rotate_normals)
         noisy = prepare(noisy_img, ctx.z_stats, features, ctx.scale).to(device)
         ref = prepare(ref_img).to(device)
         if noisy.layout.bins == 0:
@@ -282,10 +284,11 @@ def consecutive_loss(net, pairs: tuple, rng: np.random.Generator, cfg: TrainConf
     """(loss, parts) of one crop of two consecutive frames (find_frame_pairs), each denoised with its own window:
     the mean of their losses plus temporal_weight x the temporal loss; None when a crop has no bins."""
     no_aux, no_split = rng.random() < cfg.p_no_aux, rng.random() < cfg.p_no_split  # the same for both frames
+    rot = normal_rotation(rng, cfg.p_rotate_normals)
     inputs = []
     features, device = unwrap(net).config.features, model_device(net)
     for frames, ref_img, centre, ctxs in sample_consecutive(pairs, rng, cfg.crop, cfg.window, features):
-        frames, ref_img = reduce_window(frames, ref_img, rng, float(no_aux), float(no_split))
+        frames, ref_img = reduce_window(frames, ref_img, rng, float(no_aux), float(no_split), rot)
         window = [prepare(f, c.z_stats, features, c.scale).to(device) for f, c in zip(frames, ctxs)]
         if window[centre].layout.bins == 0:
             return None
