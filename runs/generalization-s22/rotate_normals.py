@@ -16,17 +16,17 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
-from ranad_core.channels import NORMAL  # noqa: E402
 from ranad_core.exr import read_deep, write_deep  # noqa: E402
+from ranad_core.train.data import random_rotation, rotated_normals  # noqa: E402
 
 
 def rotation(rng, yaw_only):
+    """A yaw of 0.5 rad or more either way (yaw_only), else a uniform rotation, as `ranad train --rotate-normals`
+    draws them."""
     if yaw_only:
         a = rng.uniform(0.5, 2 * np.pi - 0.5)
         return np.array([[np.cos(a), 0, np.sin(a)], [0, 1, 0], [-np.sin(a), 0, np.cos(a)]])
-    q, r = np.linalg.qr(rng.normal(size=(3, 3)))
-    q = q * np.sign(np.diag(r))
-    return q if np.linalg.det(q) > 0 else -q
+    return random_rotation(rng)
 
 
 ap = argparse.ArgumentParser()
@@ -41,9 +41,5 @@ for scene in sorted(glob.glob(os.path.join(a.src, "scene_*"))):
     shutil.copytree(scene, out, dirs_exist_ok=True)
     rot = rotation(rng, a.yaw)
     for f in glob.glob(os.path.join(out, "*", "noisy_*.exr")):
-        img = read_deep(f)
-        cols = [img.channels.index(c) for c in NORMAL]
-        vals = img.values.copy()
-        vals[:, cols] = (vals[:, cols].astype(np.float64) @ rot.T).astype(vals.dtype)
-        write_deep(f, img.with_values(vals))
+        write_deep(f, rotated_normals(read_deep(f), rot))
     print(out, np.round(rot, 3).tolist())
