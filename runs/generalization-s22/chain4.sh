@@ -15,6 +15,8 @@ for s in heldout_g1fog heldout_g1int8 heldout_g1sg8 heldout_g1fog_rot heldout_g1
          heldout_g1sg8_yaw; do
     ev gzw4 $s $R/cpu-small-pdl-gzw-t4
 done
+[ -f s22/evX_gzw4/eval.md ] || ( time ranad eval heldout_g1sg8 -o s22/evX_gzw4 --model $R/cpu-small-pdl-gzw-t4 \
+    --held-out glass,layers,interior,fog --grid 0 --kind deepz --exposure -6,0,6 ) > s22/evX_gzw4.log 2>&1
 echo done > s22/chain4.done
 # issue 27's figures on this machine (AVX-512), nothing else running
 cd /work/main
