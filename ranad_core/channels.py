@@ -367,31 +367,40 @@ def canonical(img: DeepImage, m: ChannelMap) -> tuple[DeepImage, np.ndarray | No
     """(the canonical image the model reads, the beauty residual [N, 3] or None).
 
     In full mode the residual is beauty - diffuse - specular - emission (what the split leaves out); in no-split
-    mode the canonical diffuse is beauty - emission and there is no residual."""
-    blocks, names = [], []   # [N, k] blocks joined once at the end (row-wise copies, not one strided pass per column)
+    mode the canonical diffuse is beauty - emission and there is no residual.
 
-    def put(block_names, data):
-        names.extend(block_names)
-        blocks.append(np.asarray(data, np.float32).reshape(img.num_bins, len(block_names)))
+    Built in one row-wise gather of every column that is a plain copy of a file channel (with a renderer's usual
+    one-part layers, all of them), then the computed blocks written over their placeholders: joining per-layer
+    blocks cost a gather per layer and a copy of the whole image more (1.4 s of a 2.9 M-bin frame against 0.2)."""
+    blocks = []   # (canonical names, source channel names to copy, or an [N, k] array)
+
+    def part_names(layer):
+        parts = layer_parts(m.layers.get(layer))
+        return None if not parts else parts[0] if len(parts) == 1 else False   # False: a sum, computed
 
     def get(layer):
         return layer_values(img, m.layers.get(layer))
 
-    beauty = img.columns(m.beauty)
-    emission = get("emission")
+    emission_src = part_names("emission")
     residual = None
     if m.split:
-        diffuse, specular = get("diffuse"), get("specular")
-        residual = beauty - diffuse - specular - (emission if emission is not None else 0)
-        put([c for i in range(3) for c in (DIFFUSE[i], SPECULAR[i])], np.stack([diffuse, specular], 2))
+        dif, spe = part_names("diffuse"), part_names("specular")
+        if dif and spe:
+            blocks.append(([c for i in range(3) for c in (DIFFUSE[i], SPECULAR[i])],
+                           [c for i in range(3) for c in (dif[i], spe[i])]))
+        else:
+            blocks.append(([c for i in range(3) for c in (DIFFUSE[i], SPECULAR[i])],
+                           np.stack([get("diffuse"), get("specular")], 2).reshape(img.num_bins, 6)))
+    elif emission_src is None:
+        blocks.append((list(DIFFUSE), list(m.beauty)))
     else:
-        put(list(DIFFUSE), beauty - (emission if emission is not None else 0))
-    if emission is not None:
-        put(list(EMISSION), emission)
+        blocks.append((list(DIFFUSE), img.columns(m.beauty) - get("emission")))
+    if emission_src is not None:
+        blocks.append((list(EMISSION), list(emission_src) if emission_src else get("emission")))
     for layer, canonical_names in (("albedo", ALBEDO), ("normal", NORMAL)):
-        data = get(layer) if m.guides else None
-        if data is not None:
-            put(list(canonical_names), data)
+        src = part_names(layer) if m.guides else None
+        if src is not None:
+            blocks.append((list(canonical_names), list(src) if src else get(layer)))
     direct = [(ALPHA, m.alpha), (DEPTH, m.depth)]
     if m.depth_back:
         direct.append((DEPTH_BACK, m.depth_back))
@@ -400,8 +409,23 @@ def canonical(img: DeepImage, m: ChannelMap) -> tuple[DeepImage, np.ndarray | No
     for names_ in (PRIOR, FLAT_NOISY):   # a flat prior ranad attached to the frame (carried through compensation)
         if all(c in img.channels for c in names_):
             direct += [(c, c) for c in names_]
-    put([c for c, _ in direct], img.columns([src for _, src in direct]))
-    values = np.concatenate(blocks, 1)
+    blocks.append(([c for c, _ in direct], [src for _, src in direct]))
+
+    names = [c for block_names, _ in blocks for c in block_names]
+    index = [img.channel_index(s) if isinstance(src, list) else 0 for _, src in blocks for s in
+             (src if isinstance(src, list) else range(np.shape(src)[1]))]
+    values = np.take(img.values, index, axis=1)
+    at = 0
+    for block_names, src in blocks:
+        if not isinstance(src, list):
+            values[:, at:at + len(block_names)] = np.asarray(src, np.float32).reshape(img.num_bins, -1)
+        at += len(block_names)
+    if m.split:
+        col = {c: i for i, c in enumerate(names)}
+        cols = lambda group: np.take(values, [col[c] for c in group], axis=1)   # noqa: E731
+        residual = img.columns(m.beauty) - cols(DIFFUSE) - cols(SPECULAR)
+        if emission_src is not None:
+            residual = residual - cols(EMISSION)
     out = DeepImage(values=values, offsets=img.offsets, channels=names, data_window=img.data_window,
                     display_window=img.display_window)
     return out, residual

@@ -13,7 +13,8 @@ import torch
 from click.testing import CliRunner
 
 from ranad_cli.main import cli
-from ranad_core.channels import canonical, detect, mapping_options
+from ranad_core.channels import (ALBEDO, ALPHA, DEPTH, DIFFUSE, EMISSION, NORMAL, SPECULAR, canonical, detect,
+                                 mapping_options)
 from ranad_core.deep import DeepImage
 from ranad_core.errors import RanadError
 from ranad_core.exr import read_deep, write_deep
@@ -180,3 +181,40 @@ def test_preset_shows_in_info_and_denoise(original, tmp_path):
     assert "motion channels: motion_next=motionvector.x,motionvector.y (ndc, y up)" in r.output
     r = CliRunner().invoke(cli, ["info", "--no-stats", str(path)])
     assert "motion channels: none (not mapped; may hold motion: motionvector.x, motionvector.y" in r.output
+
+
+@pytest.mark.parametrize("layers", [("diffuse", "specular", "emission"), ("diffuse", "specular"), ("emission",), ()])
+def test_canonical_columns_against_the_definitions(original, layers):
+    """canonical gathers the copied columns in one pass and writes the computed ones over placeholders: every
+    canonical channel is checked against its definition on the file's own columns (split: the layers as they are
+    and residual = beauty - diffuse - specular - emission; no split: diffuse = beauty - emission)."""
+    drop = {"diffuse", "specular", "emission"} - set(layers)
+    img = original.select([c for c in original.channels if c.split(".")[0] not in drop])
+    if "emission" in layers:   # the example's emission is black: give it values, so that leaving it out shows
+        values = img.values.copy()
+        for c in "RGB":
+            values[:, img.channels.index(f"emission.{c}")] = np.random.default_rng(1).uniform(0, 1, img.num_bins)
+        img = img.with_values(values)
+    m = detect(img)
+    got, res = canonical(img, m)
+    col = lambda name: img.values[:, img.channels.index(name)].astype(np.float64)   # noqa: E731
+    beauty = np.stack([col(c) for c in "RGB"], 1)
+    emission = np.stack([col(f"emission.{c}") for c in "RGB"], 1) if "emission" in layers else 0.0
+    if m.split:
+        assert "diffuse" in layers and "specular" in layers
+        expect_res = beauty - sum(np.stack([col(f"{p}.{c}") for c in "RGB"], 1) for p in ("diffuse", "specular"))
+        np.testing.assert_allclose(res, expect_res - emission, rtol=1e-5, atol=1e-5)
+        for p in ("diffuse", "specular"):
+            for canon, c in zip(DIFFUSE if p == "diffuse" else SPECULAR, "RGB"):
+                assert np.array_equal(got.channel(canon), img.channel(f"{p}.{c}"))
+    else:
+        assert res is None
+        diffuse = np.stack([got.channel(c) for c in DIFFUSE], 1)
+        np.testing.assert_allclose(diffuse, beauty - emission, rtol=1e-6, atol=1e-6)
+        assert not set(SPECULAR) & set(got.channels)
+    assert set(EMISSION) <= set(got.channels) if "emission" in layers else not set(EMISSION) & set(got.channels)
+    for layer, names in (("albedo", ALBEDO), ("normal", NORMAL)):
+        for canon, src in zip(names, m.layers[layer]):
+            assert np.array_equal(got.channel(canon), img.channel(src))
+    assert np.array_equal(got.channel(ALPHA), img.channel(m.alpha))
+    assert np.array_equal(got.channel(DEPTH), img.channel(m.depth))
