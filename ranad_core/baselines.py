@@ -36,14 +36,26 @@ def composite_groups(img: DeepImage, groups: list) -> list:
     a = img.channel(ALPHA)[:, None]
     vals = [cols if premultiplied else cols * a for cols, premultiplied in groups]
     width = sum(v.shape[1] for v in vals)
-    out = flatten_torch(torch.from_numpy(np.concatenate([*vals, a], 1).astype(np.float32)),
-                        torch.from_numpy(img.offsets), width).numpy()
+    out = composite(np.concatenate([*vals, a], 1).astype(np.float32), img.offsets, width)
     res, at = [], 0
     for cols, premultiplied in groups:
         part = out[:, at:at + cols.shape[1]]
         at += cols.shape[1]
         res.append(part if premultiplied else part / np.maximum(out[:, -1:], EPS))
     return res
+
+
+def composite(values: np.ndarray, offsets: np.ndarray, alpha_col: int) -> np.ndarray:
+    """[P, C] over composite of sorted bins' float32 [N, C] columns, every column weighted by the transmittance of
+    column `alpha_col`: the C++ one-pass kernel where it is built (deterministic, any thread count), else
+    flatten_torch (the differentiable one training uses; equal to rounding, tests/test_deep.py)."""
+    from .rana.extension import cpu_extension_or_none
+
+    ext = cpu_extension_or_none()
+    v, off = torch.from_numpy(np.ascontiguousarray(values, np.float32)), torch.from_numpy(offsets.astype(np.int64))
+    if ext is not None:
+        return ext.composite_rows(v, off.contiguous(), int(alpha_col)).numpy()
+    return flatten_torch(v, off, alpha_col).numpy()
 
 
 def oidn_flat(noisy: DeepImage) -> np.ndarray:

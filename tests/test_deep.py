@@ -642,6 +642,38 @@ def test_flatten_torch_gradcheck():
     assert torch.autograd.gradcheck(lambda x: flatten_torch(x, offsets, [2, -1, 2]), (v,))
 
 
+def test_composite_kernel_matches_flatten_torch_and_the_thread_count():
+    """baselines.composite (the C++ one-pass kernel the flat prior uses) against flatten_torch, the differentiable
+    composite, on bins with opaque, clear and out-of-range alphas, empty pixels and a deep pixel; and the same
+    bits with 1 and 2 threads."""
+    torch = pytest.importorskip("torch")
+    from ranad_core.baselines import composite
+    from ranad_core.rana.extension import cpu_extension_or_none
+
+    if cpu_extension_or_none() is None:
+        pytest.skip("the C++ kernels do not build here (composite then is flatten_torch itself)")
+    rng = np.random.default_rng(3)
+    counts = rng.integers(0, 6, 500)
+    counts[:3] = (0, 40, 1)
+    offsets = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
+    n = int(offsets[-1])
+    values = rng.uniform(-0.5, 3, (n, 5)).astype(np.float32)
+    values[:, 4] = rng.choice([0.0, 0.3, 0.9, 1.0, 1.5, -0.2], n)
+    expect = flatten_torch(torch.from_numpy(values).double(), torch.from_numpy(offsets), 4).numpy()
+    threads = torch.get_num_threads()
+    try:
+        torch.set_num_threads(1)
+        one = composite(values, offsets, 4)
+        torch.set_num_threads(2)
+        two = composite(values, offsets, 4)
+    finally:
+        torch.set_num_threads(threads)
+    assert one.dtype == np.float32 and one.shape == (len(counts), 5)
+    np.testing.assert_allclose(one, expect, rtol=1e-6, atol=1e-6)
+    assert np.array_equal(one, two)
+    assert (one[0] == 0).all()
+
+
 # ---------------------------------------------------------------------------------------------------------
 # crop / merge / gather
 # ---------------------------------------------------------------------------------------------------------

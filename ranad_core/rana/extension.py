@@ -35,8 +35,9 @@ def _source_dir() -> Path:
 SOURCE_DIR = _source_dir()
 # the bindings, and the kernel instantiations split so that the build runs them in parallel
 CPU_SOURCES = ("rana_cpu.cpp", "rana_cpu_f32_hb4.cpp", "rana_cpu_f32_hb2.cpp", "rana_cpu_f32_hb1.cpp",
-               "rana_cpu_other.cpp", "rows_cpu.cpp")
-CPU_HEADERS = ("rana_math.h", "rana_binding.h", "rana_cpu_kernels.h", "rana_cpu_buffers.h", "rows_cpu.h")
+               "rana_cpu_other.cpp", "rows_cpu.cpp", "composite_cpu.cpp")
+CPU_HEADERS = ("rana_math.h", "rana_binding.h", "rana_cpu_kernels.h", "rana_cpu_buffers.h", "rows_cpu.h",
+               "composite_cpu.h")
 
 
 def _cpu_tag() -> str:
