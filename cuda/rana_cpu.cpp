@@ -229,5 +229,5 @@ PYBIND11_MODULE(TORCH_EXTENSION_NAME, m) {
   m.def("rows_ln_linear", &rows_ln_linear, "fused [LayerNorm] + linear, split into column blocks (inference)");
   m.def("rows_linear_residual", &rows_linear_residual, "fused residual + linear(s) (inference)");
   m.def("rows_mlp", &rows_mlp, "fused [LayerNorm] + linear + ReLU + linear [+ residual] (inference)");
-  m.def("composite_rows", &composite_rows, "front-to-back over composite of sorted bins per pixel (inference)");
+  m.def("composite_blocks", &composite_blocks, "front-to-back over composite of sorted bins per pixel (inference)");
 }

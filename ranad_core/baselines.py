@@ -32,30 +32,28 @@ def composite_columns(img: DeepImage, cols: np.ndarray, premultiplied: bool) -> 
 
 def composite_groups(img: DeepImage, groups: list) -> list:
     """composite_columns of several (cols [N, C_i], premultiplied) groups in one pass over the bins: the
-    transmittance, most of a composite's cost, is computed once for all of them."""
+    transmittance, most of a composite's cost, is computed once for all of them. The C++ kernel where it is built
+    (each group read where it lies, deterministic at any thread count), else flatten_torch (the differentiable
+    composite training uses; the two agree to rounding, tests/test_deep.py)."""
+    from .rana.extension import cpu_extension_or_none
+
+    ext = cpu_extension_or_none()
+    if ext is not None:
+        f32 = lambda x: torch.from_numpy(np.ascontiguousarray(x, np.float32))   # noqa: E731
+        outs = ext.composite_blocks([f32(cols) for cols, _ in groups], [bool(p) for _, p in groups],
+                                    f32(img.channel(ALPHA)), torch.from_numpy(img.offsets.astype(np.int64)), EPS)
+        return [o.numpy() for o in outs]
     a = img.channel(ALPHA)[:, None]
     vals = [cols if premultiplied else cols * a for cols, premultiplied in groups]
     width = sum(v.shape[1] for v in vals)
-    out = composite(np.concatenate([*vals, a], 1).astype(np.float32), img.offsets, width)
+    out = flatten_torch(torch.from_numpy(np.concatenate([*vals, a], 1).astype(np.float32)),
+                        torch.from_numpy(img.offsets), width).numpy()
     res, at = [], 0
     for cols, premultiplied in groups:
         part = out[:, at:at + cols.shape[1]]
         at += cols.shape[1]
         res.append(part if premultiplied else part / np.maximum(out[:, -1:], EPS))
     return res
-
-
-def composite(values: np.ndarray, offsets: np.ndarray, alpha_col: int) -> np.ndarray:
-    """[P, C] over composite of sorted bins' float32 [N, C] columns, every column weighted by the transmittance of
-    column `alpha_col`: the C++ one-pass kernel where it is built (deterministic, any thread count), else
-    flatten_torch (the differentiable one training uses; equal to rounding, tests/test_deep.py)."""
-    from .rana.extension import cpu_extension_or_none
-
-    ext = cpu_extension_or_none()
-    v, off = torch.from_numpy(np.ascontiguousarray(values, np.float32)), torch.from_numpy(offsets.astype(np.int64))
-    if ext is not None:
-        return ext.composite_rows(v, off.contiguous(), int(alpha_col)).numpy()
-    return flatten_torch(v, off, alpha_col).numpy()
 
 
 def oidn_flat(noisy: DeepImage) -> np.ndarray:

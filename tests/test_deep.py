@@ -643,35 +643,42 @@ def test_flatten_torch_gradcheck():
 
 
 def test_composite_kernel_matches_flatten_torch_and_the_thread_count():
-    """baselines.composite (the C++ one-pass kernel the flat prior uses) against flatten_torch, the differentiable
-    composite, on bins with opaque, clear and out-of-range alphas, empty pixels and a deep pixel; and the same
-    bits with 1 and 2 threads."""
+    """baselines.composite_groups (the C++ one-pass kernel the flat prior uses) against flatten_torch, the
+    differentiable composite, on bins with opaque, clear and out-of-range alphas, empty pixels and a deep pixel, for
+    a premultiplied group and one normalised by the pixel's alpha; and the same bits with 1 and 2 threads."""
     torch = pytest.importorskip("torch")
-    from ranad_core.baselines import composite
+    from ranad_core.baselines import EPS, composite_groups
     from ranad_core.rana.extension import cpu_extension_or_none
 
     if cpu_extension_or_none() is None:
-        pytest.skip("the C++ kernels do not build here (composite then is flatten_torch itself)")
+        pytest.skip("the C++ kernels do not build here (composite_groups then uses flatten_torch itself)")
     rng = np.random.default_rng(3)
     counts = rng.integers(0, 6, 500)
     counts[:3] = (0, 40, 1)
     offsets = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
     n = int(offsets[-1])
-    values = rng.uniform(-0.5, 3, (n, 5)).astype(np.float32)
-    values[:, 4] = rng.choice([0.0, 0.3, 0.9, 1.0, 1.5, -0.2], n)
-    expect = flatten_torch(torch.from_numpy(values).double(), torch.from_numpy(offsets), 4).numpy()
+    values = rng.uniform(-0.5, 3, (n, 6)).astype(np.float32)
+    values[:, 3] = rng.choice([0.0, 0.3, 0.9, 1.0, 1.5, -0.2], n)
+    img = DeepImage(values=values, offsets=offsets, channels=["R", "G", "B", "A", "u", "v"],
+                    data_window=(0, 0, len(counts) - 1, 0), display_window=(0, 0, len(counts) - 1, 0))
+    groups = [(values[:, :3], True), (values[:, 4:], False)]
+    v64 = torch.from_numpy(values).double()
+    a = v64[:, 3:4]
+    flat = flatten_torch(torch.cat([v64[:, :3], v64[:, 4:] * a, a], 1), torch.from_numpy(offsets), 5).numpy()
+    expect = [flat[:, :3], flat[:, 3:5] / np.maximum(flat[:, 5:], EPS)]
     threads = torch.get_num_threads()
     try:
         torch.set_num_threads(1)
-        one = composite(values, offsets, 4)
+        one = composite_groups(img, groups)
         torch.set_num_threads(2)
-        two = composite(values, offsets, 4)
+        two = composite_groups(img, groups)
     finally:
         torch.set_num_threads(threads)
-    assert one.dtype == np.float32 and one.shape == (len(counts), 5)
-    np.testing.assert_allclose(one, expect, rtol=1e-6, atol=1e-6)
-    assert np.array_equal(one, two)
-    assert (one[0] == 0).all()
+    for got, want, again in zip(one, expect, two):
+        assert got.dtype == np.float32 and got.shape == want.shape
+        np.testing.assert_allclose(got, want, rtol=1e-5, atol=1e-5)
+        assert np.array_equal(got, again)
+    assert (one[0][0] == 0).all() and (one[1][0] == 0).all()
 
 
 # ---------------------------------------------------------------------------------------------------------
