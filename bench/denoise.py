@@ -47,7 +47,9 @@ print(json.dumps({"seconds": time.perf_counter() - t, "peak_mb": peak, "code": c
 
 
 def run_measured(code: str, *args: str, threads: int) -> dict:
-    env = dict(os.environ, OMP_NUM_THREADS=str(threads))
+    # the baselines run under the numpy page policy ranad's command line sets for itself (ranad_cli/main.py)
+    env = dict(os.environ, OMP_NUM_THREADS=str(threads),
+               NUMPY_MADVISE_HUGEPAGE=os.environ.get("NUMPY_MADVISE_HUGEPAGE", "0"))
     p = subprocess.run([sys.executable, "-c", RUNNER, code, *args], capture_output=True, text=True, env=env, cwd=ROOT)
     last = [ln[ln.index('{"seconds"'):] for ln in p.stderr.splitlines() if '{"seconds"' in ln]  # after tqdm's codes
     if p.returncode or not last:

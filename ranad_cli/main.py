@@ -15,6 +15,11 @@ import traceback
 # CPU allocator for transparent huge pages cuts the page-fault and zeroing cost (measured in bench/rana.py: the
 # RaNA forward+backward at 512x512 in 1.89 s instead of 2.14 s). Read by torch at its first allocation.
 os.environ.setdefault("THP_MEM_ALLOC_ENABLE", "1")
+# numpy's own request for huge pages (madvise on every array of 4 MB or more) did the opposite on a 2-core AVX-512
+# VM: faulting in a fresh 221 MB array took 0.42 s against 0.09 s without it, and the held-out 1080p frame
+# (`ranad denoise F --profile`, F from bench/denoise.py --frame) 30.0 s against 28.0 s. Read when numpy is first
+# imported, so set here, before anything imports it; a user's own setting wins.
+os.environ.setdefault("NUMPY_MADVISE_HUGEPAGE", "0")
 
 
 from ranad_core import heap  # noqa: E402

@@ -69,3 +69,19 @@ def test_kept_memory_goes_back_only_near_the_ceiling():
     before, held, after_free, relieved, _ = _run("relieve")
     assert after_free - before > 60 * mb
     assert relieved - before < 8 * mb
+
+
+@pytest.mark.parametrize("user", [None, "1"])
+def test_command_line_turns_numpys_huge_pages_off_unless_the_user_set_it(user):
+    """ranad_cli.main sets NUMPY_MADVISE_HUGEPAGE=0 before numpy is imported (numpy reads it once, at import): an
+    import of numpy ahead of that line would silently undo it. A user's own setting wins."""
+    import os
+
+    getter = "getattr(np, '_core', None) or np.core"
+    code = ("import ranad_cli.main, numpy as np; "
+            f"print(int(({getter}).multiarray._get_madvise_hugepage()))")
+    env = {k: v for k, v in os.environ.items() if k != "NUMPY_MADVISE_HUGEPAGE"}
+    if user is not None:
+        env["NUMPY_MADVISE_HUGEPAGE"] = user
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, check=True)
+    assert out.stdout.strip() == ("1" if user == "1" else "0")
