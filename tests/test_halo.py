@@ -67,3 +67,45 @@ def test_export_stores_the_halo_and_denoise_uses_it(tmp_path):
 
     _, meta = cache_io.read_cache(cache_io.cache_path(str(tmp_path / "c"), str(tmp_path / "d.exr")))
     assert int(meta["halo"]) == halo
+
+
+def test_export_interpolates_two_models_of_one_config(tmp_path):
+    """`ranad export A --interpolate B=T`: every float tensor (1 - T) a + T b, the ends' halos dropped (a halo
+    measured with --measure-halo is the result's), the provenance recorded; a model of another configuration, a
+    weight outside [0, 1] or a malformed option are refused with exit 2 and no file."""
+    from safetensors.torch import save_file
+
+    files = []
+    for seed in (1, 2):
+        model = tiny_model(seed=seed)
+        path = tmp_path / f"m{seed}.safetensors"
+        save_file({k: v.contiguous() for k, v in model.state_dict().items()}, str(path),
+                  metadata={"model_config": json.dumps(model.config.to_dict()), "halo": "48"})
+        files.append(path)
+    out = tmp_path / "mix.safetensors"
+    r = CliRunner().invoke(cli, ["export", str(files[0]), "-o", str(out), "--interpolate", f"{files[1]}=0.25"])
+    assert r.exit_code == 0, r.output
+    mixed = load_model(str(out))
+    a, b = (load_model(str(f)).model.state_dict() for f in files)
+    changed = 0
+    for name, v in mixed.model.state_dict().items():
+        if v.is_floating_point():
+            torch.testing.assert_close(v, 0.75 * a[name] + 0.25 * b[name], rtol=1e-6, atol=1e-7)
+            changed += not torch.equal(a[name], b[name])
+    assert changed > 0
+    assert "halo" not in mixed.metadata and mixed.metadata["interpolated"].startswith("0.25 x m2@")
+    r = CliRunner().invoke(cli, ["export", str(files[0]), "-o", str(tmp_path / "h.safetensors"), "--interpolate",
+                                 f"{files[1]}=0.5", "--measure-halo", str(FRAME)])
+    assert r.exit_code == 0, r.output
+    assert "halo" in load_model(str(tmp_path / "h.safetensors")).metadata
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["h.safetensors", "m1.safetensors", "m2.safetensors",
+                                                          "mix.safetensors"]   # no scratch file left
+    other = wide_model()
+    wide = tmp_path / "wide.safetensors"
+    save_file({k: v.contiguous() for k, v in other.state_dict().items()}, str(wide),
+              metadata={"model_config": json.dumps(other.config.to_dict())})
+    for bad in (f"{wide}=0.5", f"{files[1]}=1.5", f"{files[1]}", "=0.5"):
+        r = CliRunner().invoke(cli, ["export", str(files[0]), "-o", str(tmp_path / "bad.safetensors"),
+                                     "--interpolate", bad])
+        assert r.exit_code == 2, (bad, r.output)
+        assert not (tmp_path / "bad.safetensors").exists()

@@ -157,12 +157,43 @@ def checkpoint_metadata(ckpt: dict) -> dict:
             "train_config": json.dumps(ckpt.get("train_config", {}))}
 
 
-def export_weights(checkpoint: str | Path, out: str | Path, extra: dict | None = None) -> Path:
+def interpolate_weights(state: dict, meta: dict, other: str, t: float) -> tuple[dict, dict]:
+    """(1 - t) x `state` + t x the weights of model `other` (a name, file or run), tensor by tensor, with the
+    metadata saying so. Why: weights between a model and its own fine-tuned descendant often hold up better on data
+    neither was trained on than either end (robust fine-tuning's weight interpolation); both must be the same
+    architecture, and tensors that are not floating point (counters, indices) must already agree."""
+    if not 0.0 <= t <= 1.0:
+        raise RanadError(f"interpolation weight {t} outside [0, 1]", other)
+    path = resolve(other)
+    other_state, other_meta = read_weights(path)
+    if json.loads(other_meta.get("model_config", "null")) != json.loads(meta.get("model_config", "null")):
+        raise RanadError("cannot interpolate: another model configuration", path)
+    if set(other_state) != set(state) or any(other_state[k].shape != v.shape for k, v in state.items()):
+        raise RanadError("cannot interpolate: the tensors differ in names or shapes", path)
+    out = {}
+    for k, v in state.items():
+        if v.is_floating_point():
+            out[k] = ((1.0 - t) * v.double() + t * other_state[k].double()).to(v.dtype)
+        elif torch.equal(v, other_state[k]):
+            out[k] = v
+        else:
+            raise RanadError(f"cannot interpolate: integer tensor {k!r} differs", path)
+    name = path.stem if path.suffix == ".safetensors" else path.parent.name
+    meta = {k: v for k, v in meta.items() if k not in ("halo", "halo_measured_on")}   # the ends' halos, not its own
+    meta["interpolated"] = f"{t:g} x {name}@{content_digest(other_state, other_meta)}"
+    return out, meta
+
+
+def export_weights(checkpoint: str | Path, out: str | Path, extra: dict | None = None,
+                   interpolate: tuple[str, float] | None = None) -> Path:
     """Write a training checkpoint's model weights as safetensors with the config and provenance metadata; a
-    .safetensors source is copied with its metadata updated by `extra`."""
+    .safetensors source is copied with its metadata updated by `extra`. `interpolate` (MODEL, t): the weights
+    written are (1 - t) x the checkpoint's + t x MODEL's (interpolate_weights)."""
     from safetensors.torch import save_file
 
     state, meta = read_weights(resolve(str(checkpoint)))
+    if interpolate is not None:
+        state, meta = interpolate_weights(state, meta, *interpolate)
     state = {k: v.contiguous() for k, v in state.items()}
     meta.update({k: str(v) for k, v in (extra or {}).items()})
     with atomic_output(out) as tmp:
