@@ -371,7 +371,8 @@ def canonical(img: DeepImage, m: ChannelMap) -> tuple[DeepImage, np.ndarray | No
 
     Built in one row-wise gather of every column that is a plain copy of a file channel (with a renderer's usual
     one-part layers, all of them), then the computed blocks written over their placeholders: joining per-layer
-    blocks cost a gather per layer and a copy of the whole image more (1.4 s of a 2.9 M-bin frame against 0.2)."""
+    blocks cost a gather per layer and a copy of the whole image more (1.5 s of a 2.9 M-bin frame against 0.15-0.8
+    s, the larger where the output lands on fresh pages)."""
     blocks = []   # (canonical names, source channel names to copy, or an [N, k] array)
 
     def part_names(layer):
