@@ -2,8 +2,7 @@
 # session 23, third: v6 lost 1.5% to v5 on box-filtered held-out shots (heldout_g3s2; its pool is all Gaussian-
 # filtered): v6's recipe again from v6 with the box-filtered centre frames of train_g3 and train_g3s added (a third
 # of the scenes), then scored on the Gaussian sets, the turned one and the box-filtered shots
-cd /work/data
-. /work/main/.venv/bin/activate
+. "$(dirname "$0")/common.sh"
 R=/work/main/runs
 [ -f $R/cpu-small-pdl-gzw-t6/train.done ] || { ( time OMP_NUM_THREADS=2 ranad train train_g33_win train_g31_sub \
     train_g31_sub train_g30_sub train_g30_sub train_g3 train_g3s -o $R/cpu-small-pdl-gzw-t6 \
@@ -12,8 +11,6 @@ R=/work/main/runs
     --spp-weight 128=2 --rotate-normals 0.5 ) > s23/train_gzw6.log 2>&1 && touch $R/cpu-small-pdl-gzw-t6/train.done; }
 [ -f s23/evt_gzw6/temporal.md ] || ( time ranad eval heldout_g3s2 -o s23/evt_gzw6 --temporal \
     --model $R/cpu-small-pdl-gzw-t6 --cross-model s23/xg6.safetensors ) > s23/evt_gzw6.log 2>&1
-ev() { [ -f s23/ev_$1_$2/eval.md ] || ( time ranad eval $2 -o s23/ev_$1_$2 --model $3 \
-    --held-out glass,layers,interior,fog --grid 0 ) > s23/ev_$1_$2.log 2>&1; }
 for s in heldout_g1sg8 heldout_g1fog heldout_g1int8 heldout_g1sg8_rot; do
     ev gzw6 $s $R/cpu-small-pdl-gzw-t6
 done

@@ -1,11 +1,8 @@
 #!/bin/bash
 # session 23, sixth: v5 and v6 weights interpolated half-way (robust fine-tuning's weight interpolation: v6 is v5
 # fine-tuned), scored on every set v5 and v6 were
-cd /work/data
-. /work/main/.venv/bin/activate
+. "$(dirname "$0")/common.sh"
 while [ ! -f s23/chain5.done ]; do sleep 10; done
-ev() { [ -f s23/ev_$1_$2/eval.md ] || ( time ranad eval $2 -o s23/ev_$1_$2 --model $3 \
-    --held-out glass,layers,interior,fog --grid 0 ) > s23/ev_$1_$2.log 2>&1; }
 for s in heldout_g1ac8 heldout_g1sg8 heldout_g1fog heldout_g1int8 heldout_g1sg8_rot; do
     ev mix50 $s s23/mix50.safetensors
 done

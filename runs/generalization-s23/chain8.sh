@@ -1,11 +1,8 @@
 #!/bin/bash
 # session 23, eighth: the shipped v7 file itself on the single-frame sets (mix50, the scratch file chain6 scored, was
 # interpolated in float32; the export interpolates in float64)
-cd /work/data
-. /work/main/.venv/bin/activate
+. "$(dirname "$0")/common.sh"
 while [ ! -f s23/chain7.done ]; do sleep 10; done
-ev() { [ -f s23/ev_$1_$2/eval.md ] || ( time ranad eval $2 -o s23/ev_$1_$2 --model $3 \
-    --held-out glass,layers,interior,fog --grid 0 ) > s23/ev_$1_$2.log 2>&1; }
 for s in heldout_g1ac8 heldout_g1sg8 heldout_g1fog heldout_g1int8 heldout_g1sg8_rot heldout_g1sg8_yaw \
          heldout_g1fog_rot heldout_g1int8_rot heldout_g1w4; do
     ev v7 $s cpu-small-pdl-gza-v7
