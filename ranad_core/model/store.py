@@ -112,8 +112,12 @@ def load_model(spec: str | None = None, backend: str = "auto") -> LoadedModel:
     model.eval()
     if str(meta.get("halo", "")).isdigit():   # measured by `ranad export --measure-halo` (halo.py)
         model.measured_halo = int(meta["halo"])
-    name = path.stem if path.suffix == ".safetensors" else path.parent.name
-    return LoadedModel(model, f"{name}@{content_digest(state, meta)}", meta)
+    return LoadedModel(model, f"{model_name(path)}@{content_digest(state, meta)}", meta)
+
+
+def model_name(path: Path) -> str:
+    """The name a model's id carries: a .safetensors file's stem, or a training run's folder name."""
+    return path.stem if path.suffix == ".safetensors" else path.parent.name
 
 
 def read_weights(path: Path) -> tuple[dict, dict]:
@@ -178,9 +182,8 @@ def interpolate_weights(state: dict, meta: dict, other: str, t: float) -> tuple[
             out[k] = v
         else:
             raise RanadError(f"cannot interpolate: integer tensor {k!r} differs", path)
-    name = path.stem if path.suffix == ".safetensors" else path.parent.name
     meta = {k: v for k, v in meta.items() if k not in ("halo", "halo_measured_on")}   # the ends' halos, not its own
-    meta["interpolated"] = f"{t:g} x {name}@{content_digest(other_state, other_meta)}"
+    meta["interpolated"] = f"{t:g} x {model_name(path)}@{content_digest(other_state, other_meta)}"
     return out, meta
 
 
