@@ -1,4 +1,6 @@
-"""Where a denoise run's time goes: wall-clock seconds per pipeline stage (`ranad denoise --profile`).
+"""Where a denoise run's time goes: wall-clock seconds per pipeline stage (`ranad denoise --profile`), and the
+process's CPU seconds in each (all threads together): their ratio, the threads kept busy, shows the stages that
+run serially on a machine with many cores.
 
 The pipeline marks its stages with `with stage(name):`; nothing is recorded (and the marks cost a global lookup)
 unless a `profiling()` block is active. Stages named "parent/child" are inside their parent and are listed under
@@ -19,26 +21,32 @@ STAGES = ("read", "motion", "inputs", "inputs/sort and prior", "tiles", "tiles/g
 @dataclass
 class Profile:
     seconds: dict = field(default_factory=dict)
+    cpu: dict = field(default_factory=dict)        # process CPU seconds (every thread's) per stage
     calls: dict = field(default_factory=dict)
     tiles: list = field(default_factory=list)      # (bins in the haloed window, core bins, seconds)
 
-    def add(self, name: str, secs: float) -> None:
+    def add(self, name: str, secs: float, cpu_secs: float = 0.0) -> None:
         self.seconds[name] = self.seconds.get(name, 0.0) + secs
+        self.cpu[name] = self.cpu.get(name, 0.0) + cpu_secs
         self.calls[name] = self.calls.get(name, 0) + 1
 
     def total(self) -> float:
         return sum(v for k, v in self.seconds.items() if "/" not in k)
 
     def table(self) -> str:
-        """A markdown table: stage, seconds, share of the total, calls; then the per-tile summary."""
+        """A markdown table: stage, seconds, share of the total, calls, CPU seconds and threads busy (CPU over wall
+        seconds); then the per-tile summary."""
         total = self.total() or 1e-12
         order = [s for s in STAGES if s in self.seconds] + sorted(set(self.seconds) - set(STAGES))
-        lines = ["| stage | seconds | share | calls |", "|---|---|---|---|"]
+        lines = ["| stage | seconds | share | calls | cpu seconds | threads busy |", "|---|---|---|---|---|---|"]
         for name in order:
             label = ("  - " + name.split("/", 1)[1]) if "/" in name else name
-            lines.append(f"| {label} | {self.seconds[name]:.2f} | {100 * self.seconds[name] / total:.1f}% | "
-                         f"{self.calls[name]} |")
-        lines.append(f"| total | {self.total():.2f} | 100% | |")
+            secs, cpu = self.seconds[name], self.cpu.get(name, 0.0)
+            lines.append(f"| {label} | {secs:.2f} | {100 * secs / total:.1f}% | {self.calls[name]} | {cpu:.2f} | "
+                         f"{cpu / max(secs, 1e-12):.2f} |")
+        cpu_total = sum(v for k, v in self.cpu.items() if "/" not in k)
+        lines.append(f"| total | {self.total():.2f} | 100% | | {cpu_total:.2f} | "
+                     f"{cpu_total / max(self.total(), 1e-12):.2f} |")
         if self.tiles:
             bins = [t[0] for t in self.tiles]
             core = sum(t[1] for t in self.tiles)
@@ -60,11 +68,11 @@ def stage(name: str):
     if _active is None:
         yield
         return
-    t = time.perf_counter()
+    t, c = time.perf_counter(), time.process_time()
     try:
         yield
     finally:
-        _active.add(name, time.perf_counter() - t)
+        _active.add(name, time.perf_counter() - t, time.process_time() - c)
 
 
 def record_tile(bins: int, core_bins: int, seconds: float) -> None:

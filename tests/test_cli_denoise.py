@@ -5,8 +5,10 @@ the README's shot with the shipped cross-frame default and --reference, --thread
 from __future__ import annotations
 
 import json
+import os
 import re
 import shutil
+import time
 from pathlib import Path
 
 import numpy as np
@@ -326,6 +328,12 @@ def test_profile_reports_every_stage_and_changes_nothing(tmp_path, model_file):
     assert r.exit_code == 0, r.output
     np.testing.assert_array_equal(read_deep(plain).values, read_deep(profiled).values)
     rows = dict(re.findall(r"^\| ([a-z -]+?) \| ([\d.]+) \|", r.output, re.M))
+    cpu = {k: (float(c), float(b)) for k, c, b in
+           re.findall(r"^\| ([a-z -]+?) \| [\d.]+ \| [\d.]+% \| \d* ?\| ([\d.]+) \| ([\d.]+) \|", r.output, re.M)}
+    assert set(cpu) == set(rows), r.output
+    for k, (c, busy) in cpu.items():   # threads busy = CPU / wall seconds, at most the threads there are
+        assert busy == pytest.approx(c / max(float(rows[k]), 1e-12), abs=0.02 + 0.01 / max(float(rows[k]), 1e-3))
+        assert busy <= os.cpu_count() + 0.5, (k, busy)
     for stage in ("read", "inputs", "tiles", "  - backbone", "  - reconstruction", "assemble", "write", "total"):
         assert stage in rows, (stage, r.output)
     top = sum(float(v) for k, v in rows.items() if not k.startswith("  - ") and k != "total")
@@ -339,6 +347,23 @@ def test_profile_reports_every_stage_and_changes_nothing(tmp_path, model_file):
     windows = [counts[max(0, y - 16):y + 48, max(0, x - 16):x + 48].sum() for y in (0, 32) for x in (0, 32)]
     assert (int(m.group(2)), int(m.group(3))) == (min(windows), max(windows))
     assert float(m.group(4)) == pytest.approx(sum(windows) / img.num_bins, abs=0.01)
+
+
+def test_profile_cpu_seconds_tell_a_waiting_stage_from_a_working_one():
+    """The profile's CPU seconds are the process's, per stage: a stage that sleeps keeps no thread busy, one that
+    computes keeps one busy."""
+    from ranad_core.profile import profiling, stage
+
+    with profiling() as prof:
+        with stage("read"):
+            time.sleep(0.3)
+        with stage("write"):
+            t = time.perf_counter()
+            while time.perf_counter() - t < 0.3:
+                sum(range(1000))
+    assert prof.cpu["read"] < 0.1 * prof.seconds["read"]
+    assert prof.cpu["write"] > 0.6 * prof.seconds["write"]
+    assert "| read |" in prof.table() and "| total |" in prof.table()
 
 
 def test_negative_depths_are_a_convention_error(tmp_path, model_file):
