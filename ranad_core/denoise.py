@@ -29,7 +29,7 @@ from . import binmerge, darkness, heap
 from .binmerge import Groups
 from .channels import (ALPHA, DEPTH, DEPTH_BACK, DEPTHS, FLAT_NOISY, PRIOR, ChannelMap, canonical, detect,
                        layer_values, split_layer)
-from .deep import DeepImage, replace_nonfinite, unsort
+from .deep import DeepImage, copy_values, replace_nonfinite, unsort
 from .model.inputs import depth_stats, prepare
 from .profile import record_tile, stage
 
@@ -428,17 +428,20 @@ def _assemble(img: DeepImage, m: ChannelMap, srt: DeepImage, perm: np.ndarray, o
     `factors`: merged thin bins (binmerge) shared back among their members before anything is written;
     `dark_radius`: darkness.dark_bins' radius (their colour is written as it was, 0)."""
     img = replace_nonfinite(img, m.depth_channels())[0]    # one NaN/Inf policy for every channel of the output
-    file_vals = img.values.copy()
+    file_vals = copy_values(img.values)
     ch = img.channels
     replaced = []
 
     def write(names, data):
-        for i, name in enumerate(names):
-            file_vals[:, ch.index(name)] = data[:, i]
-            replaced.append(name)
+        # the columns in one threaded pass over the rows (torch's index_copy_): a numpy write per column was a
+        # strided pass over the whole frame each, 0.6 s of a 6.5 M-bin, 38-channel frame against 0.07 s
+        cols = torch.tensor([ch.index(name) for name in names], dtype=torch.int64)
+        block = torch.from_numpy(np.ascontiguousarray(data, dtype=np.float32).reshape(len(file_vals), len(names)))
+        torch.from_numpy(file_vals).index_copy_(1, cols, block)
+        replaced.extend(names)
 
-    def back(a):   # sorted (merged) order -> file order
-        return unsort(a if groups is None else binmerge.split(a, groups, factors), perm)
+    def back(a):   # sorted (merged) order -> file order (read only here, so not copied when already in order)
+        return unsort(a if groups is None else binmerge.split(a, groups, factors), perm, copy=False)
 
     diffuse = back(outs["diffuse"])
     emission = layer_values(img, m.layers.get("emission"))
@@ -460,7 +463,7 @@ def _assemble(img: DeepImage, m: ChannelMap, srt: DeepImage, perm: np.ndarray, o
     if "alpha" in outs:
         alpha = np.clip(outs["alpha"], 0, 1)
         write([m.alpha], np.clip(unsort(alpha if groups is None else binmerge.split_alpha(alpha, groups, factors)
-                                        [:, None], perm), 0, 1))
+                                        [:, None], perm, copy=False), 0, 1))
     if "depth" in outs:
         z_new = np.maximum(outs["depth"][:, 0], 0)
         if groups is None:
@@ -468,9 +471,9 @@ def _assemble(img: DeepImage, m: ChannelMap, srt: DeepImage, perm: np.ndarray, o
                 if m.depth_back else 0
         else:
             z_new, thick = binmerge.split_depth(z_new, groups), groups.thick.astype(np.float32)
-        write([m.depth], unsort(z_new, perm)[:, None])
+        write([m.depth], unsort(z_new, perm, copy=False)[:, None])
         if m.depth_back:
-            write([m.depth_back], unsort(z_new + thick, perm)[:, None])
+            write([m.depth_back], unsort(z_new + thick, perm, copy=False)[:, None])
     out = img.with_values(file_vals)
     if keep_noisy:
         names = [f"{keep_noisy}{c}" for c in replaced]

@@ -285,7 +285,11 @@ def count_nonfinite(img) -> int:
     """Bins with a NaN/Inf value in any channel (what deep.replace_nonfinite replaces)."""
     import numpy as np
 
-    return int((~np.isfinite(img.values)).any(axis=1).sum()) if img.num_bins else 0
+    from .deep import all_finite
+
+    if not img.num_bins or all_finite(img.values):
+        return 0
+    return int((~np.isfinite(img.values)).any(axis=1).sum())
 
 
 NEGATIVE_DEPTH_SHARE = 0.001   # more bins than this behind the camera: a depth convention, not a stray sample

@@ -331,9 +331,11 @@ def test_profile_reports_every_stage_and_changes_nothing(tmp_path, model_file):
     cpu = {k: (float(c), float(b)) for k, c, b in
            re.findall(r"^\| ([a-z -]+?) \| [\d.]+ \| [\d.]+% \| \d* ?\| ([\d.]+) \| ([\d.]+) \|", r.output, re.M)}
     assert set(cpu) == set(rows), r.output
-    for k, (c, busy) in cpu.items():   # threads busy = CPU / wall seconds, at most the threads there are
-        assert busy == pytest.approx(c / max(float(rows[k]), 1e-12), abs=0.02 + 0.01 / max(float(rows[k]), 1e-3))
-        assert busy <= os.cpu_count() + 0.5, (k, busy)
+    for k, (c, busy) in cpu.items():   # threads busy = CPU / wall seconds (both printed rounded to 0.005 s)
+        wall = float(rows[k])
+        if wall >= 0.1:   # (shorter stages: CPU clocks of a few ms are too coarse to compare)
+            assert busy == pytest.approx(c / wall, abs=0.01 + 0.005 * (1 + busy) / wall), (k, r.output)
+            assert busy <= os.cpu_count() + 0.5, (k, busy)
     for stage in ("read", "inputs", "tiles", "  - backbone", "  - reconstruction", "assemble", "write", "total"):
         assert stage in rows, (stage, r.output)
     top = sum(float(v) for k, v in rows.items() if not k.startswith("  - ") and k != "total")

@@ -16,7 +16,9 @@ from ranad_core.deep import (
     DEPTH,
     NO_ALPHA,
     DeepImage,
+    all_finite,
     associated_alpha,
+    copy_values,
     flatten,
     flatten_torch,
     gather_bins,
@@ -409,6 +411,35 @@ def test_sorted_is_stable_front_to_back_and_unsort_inverts(channels):
     assert torch.equal(unsort(torch.from_numpy(s.values), perm), torch.from_numpy(img.values))
     s2, perm2 = s.sorted()  # already sorted: identity
     assert np.array_equal(perm2, np.arange(img.num_bins))
+    same = unsort(s.values, perm2, copy=False)   # a reader's view where nothing moves; a copy by default
+    assert same is s.values and unsort(s.values, perm2) is not s.values
+    assert np.array_equal(unsort(s.values, perm, copy=False), img.values)   # a permutation still moves
+
+
+@pytest.mark.parametrize("bad", [np.nan, np.inf, -np.inf])
+def test_all_finite_finds_one_bad_value_anywhere(bad, monkeypatch):
+    """all_finite agrees with np.isfinite(...).all(), whichever chunk (first, last, across a boundary, the short
+    tail) holds the one non-finite value."""
+    import ranad_core.deep as deep
+
+    monkeypatch.setattr(deep, "FINITE_CHUNK", 64)   # many chunks on a small array
+    v = np.random.default_rng(0).normal(size=(301, 7)).astype(np.float32)
+    assert all_finite(v) and all_finite(v[:0]) and all_finite(np.arange(5))
+    for at in (0, 63, 64, 65, 1000, v.size - 1):
+        w = v.copy()
+        w.reshape(-1)[at] = bad
+        assert not all_finite(w), at
+        assert all_finite(w[:, ::2]) == ((at % 7) % 2 == 1), at   # a strided view: its column kept or not
+    assert all_finite(np.full(3, 7.0, np.float16)) and not all_finite(np.full(3, np.inf, np.float16))
+
+
+def test_copy_values_is_an_equal_independent_array():
+    v = np.random.default_rng(1).normal(size=(1000, 5)).astype(np.float32)
+    c = copy_values(v)
+    assert c.dtype == v.dtype and np.array_equal(c, v) and not np.shares_memory(c, v)
+    c[0, 0] = 99
+    assert v[0, 0] != 99
+    assert copy_values(v[:0]).shape == (0, 5)
 
 
 def test_sorted_needs_z():
