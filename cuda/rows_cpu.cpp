@@ -265,3 +265,33 @@ torch::Tensor rows_mlp(torch::Tensor x, c10::optional<torch::Tensor> ln_w, c10::
   });
   return out;
 }
+
+torch::Tensor rows_wide_operand(torch::Tensor proj, int64_t heads, double scale, torch::Tensor terms,
+                                double term_scale, int64_t wide) {
+  check_rows(proj, "rows_wide_operand projection");
+  check_rows(terms, "rows_wide_operand terms");
+  const int64_t n = proj.size(0), dh = proj.size(1), e = terms.size(1);
+  TORCH_CHECK(heads > 0 && dh % heads == 0, "rows_wide_operand: ", dh, " columns are not whole heads of ", heads);
+  const int64_t d = dh / heads;
+  TORCH_CHECK(terms.size(0) == n, "rows_wide_operand: ", terms.size(0), " term rows, ", n, " projection rows");
+  TORCH_CHECK(d + e <= wide, "rows_wide_operand: ", d, " channels and ", e, " terms do not fit ", wide);
+  auto out = torch::empty({n, wide, heads}, proj.options());
+  const float *pp = proj.data_ptr<float>(), *tp = terms.data_ptr<float>();
+  const float s = float(scale), ts = float(term_scale);   // as torch multiplies a float32 tensor by a scalar
+  float* op = out.data_ptr<float>();
+  const int64_t row = wide * heads;
+  over_tiles(n, [&](int64_t r0, int64_t rows) {
+    for (int64_t r = r0; r < r0 + rows; ++r) {
+      float* o = op + r * row;
+      const float* p = pp + r * dh;
+#pragma omp simd
+      for (int64_t j = 0; j < dh; ++j) o[j] = p[j] * s;
+      for (int64_t c = 0; c < e; ++c) {
+        const float t = tp[r * e + c] * ts;
+        for (int64_t h = 0; h < heads; ++h) o[dh + c * heads + h] = t;
+      }
+      for (int64_t j = dh + e * heads; j < row; ++j) o[j] = 0.f;
+    }
+  });
+  return out;
+}

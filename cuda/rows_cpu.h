@@ -20,3 +20,9 @@ torch::Tensor rows_linear_residual(torch::Tensor res, torch::Tensor y1, torch::T
 torch::Tensor rows_mlp(torch::Tensor x, c10::optional<torch::Tensor> ln_w, c10::optional<torch::Tensor> ln_b,
                        double eps, torch::Tensor wt1, torch::Tensor b1, torch::Tensor wt2, torch::Tensor b2,
                        bool residual);
+
+// A reconstruction kernel's wide q or k operand, channel-major [N, wide, heads]: the projection [N, d * heads] (itself
+// channel-major) times scale, then each of the terms [N, e] times term_scale on every head, then zeros (the range and
+// layer-gate terms of reconstruction.KernelAttention._with_range, in one pass instead of one per block of columns).
+torch::Tensor rows_wide_operand(torch::Tensor proj, int64_t heads, double scale, torch::Tensor terms,
+                                double term_scale, int64_t wide);

@@ -81,6 +81,34 @@ def test_bad_shapes_are_refused():
                      torch.randn(10), True)
 
 
+@pytest.mark.parametrize("heads,d", [(2, 8), (4, 16), (1, 3)])
+def test_wide_operand_equals_the_python_assembly(heads, d):
+    """The gated kernels' wide q and k operands from the one-pass op equal, bit for bit, the ones _with_range
+    writes block by block (projection scaled, gate terms on every head, zeros), in the same channel-major layout."""
+    from ranad_core.model.reconstruction import KernelAttention, gate_terms, wide_dim
+
+    torch.manual_seed(heads)
+    mod = KernelAttention(16, heads, d, 2.5, gated=True)
+    nq, nk = 101, 77
+    q, k = torch.randn(nq, d * heads), torch.randn(nk, d * heads)
+    a, b = torch.randn(nq, 3), torch.randn(nk, 3)
+    a[:, -1], b[:, -1] = a[:, -1].abs() * 50, b[:, -1].abs() * 50     # lambdas, non-negative
+    with torch.inference_mode():
+        qa, kb = mod._with_range(q.view(nq, d, heads).transpose(1, 2), k.view(nk, d, heads).transpose(1, 2), (a, b))
+        tq, tk = gate_terms(a, b)
+        wide = wide_dim(d, tq.shape[1])
+        s = wide ** 0.5
+        fq = fused.wide_operand(q, heads, s / d ** 0.5, tq, s, wide)
+        fk = fused.wide_operand(k, heads, 1.0, tk, 1.0, wide)
+    assert fq.shape == qa.shape == (nq, heads, wide) and fk.shape == kb.shape == (nk, heads, wide)
+    assert torch.equal(fq, qa) and torch.equal(fk, kb)
+    assert fq.transpose(1, 2).is_contiguous()    # channel-major, as the kernels stream it
+    with pytest.raises(RuntimeError, match="do not fit"):
+        fused.wide_operand(q, heads, 1.0, torch.randn(nq, wide), 1.0, wide)
+    with pytest.raises(RuntimeError, match="term rows"):
+        fused.wide_operand(q, heads, 1.0, tq[:5], 1.0, wide)
+
+
 @pytest.mark.parametrize("config", ["cpu-small-pd", "cpu-small", "cpu-small-pdl-gall", "cpu-small-pdl-gza",
                                     "cpu-small-pdr"])
 def test_model_output_equals_the_plain_modules(config, monkeypatch):
@@ -98,12 +126,14 @@ def test_model_output_equals_the_plain_modules(config, monkeypatch):
         inputs = prepare(srt)
     torch.manual_seed(0)
     model = RaNAD(cfg, feature_dim(cfg.features)).eval()
-    calls = []
-    real = fused.ln_linear
+    calls, wide = [], []
+    real, real_wide = fused.ln_linear, fused.wide_operand
     monkeypatch.setattr(fused, "ln_linear", lambda *a: calls.append(1) or real(*a))
+    monkeypatch.setattr(fused, "wide_operand", lambda *a: wide.append(1) or real_wide(*a))
     with torch.inference_mode():
         fast = model(inputs)
         assert calls, "the fused path was not taken"
+        assert bool(wide) == bool(cfg.layer_gate and not cfg.prior_range), "gated operands: the one-pass path"
         monkeypatch.setenv("RANAD_NO_FUSED", "1")
         n = len(calls)
         plain = model(inputs)

@@ -78,3 +78,11 @@ def mlp(x: torch.Tensor, norm: nn.LayerNorm | None, first: nn.Linear, second: nn
     return _ext().rows_mlp(_rows(x), w, b, eps, first.weight.t().contiguous(), first.bias,
                            second.weight.t().contiguous(), second.bias, residual)
 
+
+def wide_operand(proj: torch.Tensor, heads: int, scale: float, terms: torch.Tensor, term_scale: float,
+                 wide: int) -> torch.Tensor:
+    """[N, heads, wide] (a channel-major view): proj [N, d * heads] (channel-major) times scale, then the terms
+    [N, e] times term_scale on every head, then zeros: a gated reconstruction kernel's q or k operand in one pass
+    (reconstruction.KernelAttention._with_range builds the same with a pass per block of columns)."""
+    out = _ext().rows_wide_operand(_rows(proj), heads, float(scale), _rows(terms), float(term_scale), wide)
+    return out.transpose(1, 2)

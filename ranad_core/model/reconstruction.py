@@ -57,6 +57,21 @@ def layer_gate(depth: torch.Tensor, layout: Layout) -> tuple[torch.Tensor, torch
     return g, g
 
 
+def gate_terms(a: torch.Tensor, b: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """The layer gate's columns of the wide operands, q's [Nq, 5] and k's [Nk, 5], from layer_gate's guides (log z
+    and lambda in the last two columns of a and b): q's (2 lambda_q za, -lambda_q, za^2, za, 1) against k's (zb,
+    zb^2, -lambda_k, 2 lambda_k zb, -lambda_k zb^2), whose products sum to -(lambda_q + lambda_k) (za - zb)^2 less
+    its terms of the query alone."""
+    za, lq, zb, lk = a[:, -2:-1], a[:, -1:], b[:, -2:-1], b[:, -1:]
+    return (torch.cat([2 * lq * za, -lq, za * za, za, torch.ones_like(za)], 1),
+            torch.cat([zb, zb * zb, -lk, 2 * lk * zb, -lk * zb * zb], 1))
+
+
+def wide_dim(d: int, extra: int) -> int:
+    """The head size the kernels compile that holds d channels and `extra` term columns."""
+    return next(w for w in (8, 16, 32, 64, 128) if w >= d + extra)
+
+
 class KernelAttention(nn.Module):
     """Single-purpose RaNA whose values are the noisy layer itself (no value projection): the kernel weights
     come from the embeddings, the values pass through untouched, which is what keeps the output linear."""
@@ -109,11 +124,11 @@ class KernelAttention(nn.Module):
             qs += [2 * lam * a[:, None, :3], (-lam).expand(1, H, 1)]
             ks += [b[:, None, :3], (b[:, :3] * b[:, :3]).sum(1)[:, None, None]]
         if self.gated:   # -(lambda_q + lambda_k) (za - zb)^2 without its terms of the query alone
-            za, lq, zb, lk = a[:, -2:-1], a[:, -1:], b[:, -2:-1], b[:, -1:]
-            qs.append(torch.cat([2 * lq * za, -lq, za * za, za, torch.ones_like(za)], 1)[:, None, :])
-            ks.append(torch.cat([zb, zb * zb, -lk, 2 * lk * zb, -lk * zb * zb], 1)[:, None, :])
+            tq, tk = gate_terms(a, b)
+            qs.append(tq[:, None, :])
+            ks.append(tk[:, None, :])
         extra = sum(t.shape[2] for t in qs)
-        wide = next(w for w in (8, 16, 32, 64, 128) if w >= d + extra)
+        wide = wide_dim(d, extra)
         s = math.sqrt(wide)
         # written channel-major ([N, d', H], returned as its [N, H, d'] view), the layout the kernels stream
         # without a copy, as the projections themselves are (layers.py)
@@ -137,8 +152,15 @@ class KernelAttention(nn.Module):
         stream), so the op copies no operand."""
         H, d = self.heads, self.head_dim
         (q,), (k,) = fused.ln_linear(q_feat, None, [self.q]), fused.ln_linear(k_feat, None, [self.k])
-        q, k = (x.view(len(x), d, H).transpose(1, 2) for x in (q, k))
-        q, k = self._with_range(q, k, guide)
+        if self.gated and self.range is None and guide is not None:   # _with_range's operands, one pass each
+            tq, tk = gate_terms(*guide)
+            wide = wide_dim(d, tq.shape[1])
+            s = math.sqrt(wide)
+            q = fused.wide_operand(q, H, s / math.sqrt(d), tq, s, wide)
+            k = fused.wide_operand(k, H, 1.0, tk, 1.0, wide)
+        else:
+            q, k = (x.view(len(x), d, H).transpose(1, 2) for x in (q, k))
+            q, k = self._with_range(q, k, guide)
         v = values[:, :, None].expand(-1, -1, H).contiguous().transpose(1, 2)   # channel-major [N, H, C]
         y = rana(q, k, v, q_pixels, keys.offsets, keys.size, self.radius, self.bias, backend=self.backend)
         mix = torch.softmax(self.head_mix, 0)
