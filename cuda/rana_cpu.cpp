@@ -230,5 +230,6 @@ PYBIND11_MODULE(TORCH_EXTENSION_NAME, m) {
   m.def("rows_linear_residual", &rows_linear_residual, "fused residual + linear(s) (inference)");
   m.def("rows_mlp", &rows_mlp, "fused [LayerNorm] + linear + ReLU + linear [+ residual] (inference)");
   m.def("rows_wide_operand", &rows_wide_operand, "a reconstruction kernel's wide q/k operand in one pass (inference)");
+  m.def("rows_scale_mix", &rows_scale_mix, "a reconstruction's scale mixer: linear, softmax, mix (inference)");
   m.def("composite_blocks", &composite_blocks, "front-to-back over composite of sorted bins per pixel (inference)");
 }

@@ -295,3 +295,47 @@ torch::Tensor rows_wide_operand(torch::Tensor proj, int64_t heads, double scale,
   });
   return out;
 }
+
+torch::Tensor rows_scale_mix(torch::Tensor feat, torch::Tensor wt, torch::Tensor bias,
+                             std::vector<torch::Tensor> outs) {
+  check_rows(feat, "rows_scale_mix features");
+  const int64_t n = feat.size(0), c = feat.size(1), scales = wt.size(1);
+  check_weight(wt, c, "rows_scale_mix weight");
+  check_vector(bias, scales, "rows_scale_mix bias");
+  TORCH_CHECK(scales >= 1 && int64_t(outs.size()) == scales, "rows_scale_mix: ", outs.size(), " results for ",
+              scales, " scales");
+  const int64_t v = outs[0].dim() == 2 ? outs[0].size(1) : -1;
+  std::vector<const float*> src;
+  for (auto& o : outs) {
+    check_rows(o, "rows_scale_mix result");
+    TORCH_CHECK(o.size(0) == n && o.size(1) == v, "rows_scale_mix: results of differing shapes");
+    src.push_back(o.data_ptr<float>());
+  }
+  auto out = torch::empty({n, v}, feat.options());
+  const float *fp = feat.data_ptr<float>(), *w = wt.data_ptr<float>(), *b = bias.data_ptr<float>();
+  float* op = out.data_ptr<float>();
+  over_tiles(n, [&](int64_t r0, int64_t rows) {
+    std::vector<float> logit(kTile * scales);
+    gemm_rows(fp + r0 * c, c, rows, c, w, scales, scales, b, logit.data(), scales, false);
+    for (int64_t r = 0; r < rows; ++r) {
+      float* l = logit.data() + r * scales;
+      float m = l[0], sum = 0.f;
+      for (int64_t s = 1; s < scales; ++s) m = std::max(m, l[s]);
+      for (int64_t s = 0; s < scales; ++s) sum += (l[s] = std::exp(l[s] - m));
+      for (int64_t s = 0; s < scales; ++s) l[s] /= sum;
+      const int64_t at = (r0 + r) * v;
+      float* d = op + at;
+      const float w0 = l[0];
+      const float* s0 = src[0] + at;
+#pragma omp simd
+      for (int64_t j = 0; j < v; ++j) d[j] = w0 * s0[j];
+      for (int64_t s = 1; s < scales; ++s) {
+        const float ws = l[s];
+        const float* ss = src[s] + at;
+#pragma omp simd
+        for (int64_t j = 0; j < v; ++j) d[j] += ws * ss[j];
+      }
+    }
+  });
+  return out;
+}

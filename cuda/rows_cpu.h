@@ -26,3 +26,9 @@ torch::Tensor rows_mlp(torch::Tensor x, c10::optional<torch::Tensor> ln_w, c10::
 // layer-gate terms of reconstruction.KernelAttention._with_range, in one pass instead of one per block of columns).
 torch::Tensor rows_wide_operand(torch::Tensor proj, int64_t heads, double scale, torch::Tensor terms,
                                 double term_scale, int64_t wide);
+
+// sum_s softmax(feat wt + bias)[:, s] * outs[s]: a reconstruction's scale mixer (a linear layer, a softmax over each
+// row's few scales, the per-bin convex mix of the scales' results) in one pass; each row by one thread, in a fixed
+// order, so the weights do not depend on the thread count.
+torch::Tensor rows_scale_mix(torch::Tensor feat, torch::Tensor wt, torch::Tensor bias,
+                             std::vector<torch::Tensor> outs);

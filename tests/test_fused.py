@@ -6,7 +6,6 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import numpy as np
 import pytest
 import torch
 import torch.nn.functional as F
@@ -107,6 +106,33 @@ def test_wide_operand_equals_the_python_assembly(heads, d):
         fused.wide_operand(q, heads, 1.0, torch.randn(nq, wide), 1.0, wide)
     with pytest.raises(RuntimeError, match="term rows"):
         fused.wide_operand(q, heads, 1.0, tq[:5], 1.0, wide)
+
+
+@pytest.mark.parametrize("scales,c", [(1, 3), (2, 6), (3, 1), (4, 9)])
+def test_scale_mix_is_the_softmax_mix_and_thread_free(scales, c):
+    """The fused scale mixer: softmax(mixer(feat)) over each row's scales, the scales' results mixed by it, as the
+    torch ops compute it (to rounding); equal bit for bit on one thread and two, and a convex mix (a constant
+    result comes back unchanged)."""
+    torch.manual_seed(scales)
+    feat = torch.randn(1003, 32)
+    mixer = torch.nn.Linear(32, scales)
+    outs = [torch.randn(1003, c) for _ in range(scales)]
+    with torch.inference_mode():
+        w = torch.softmax(mixer(feat), dim=1)
+        expect = sum(w[:, s, None] * outs[s] for s in range(scales))
+        got = fused.scale_mix(feat, mixer, outs)
+        close(got, expect, 1e-5)
+        threads = torch.get_num_threads()
+        try:
+            torch.set_num_threads(1)
+            one = fused.scale_mix(feat, mixer, outs)
+        finally:
+            torch.set_num_threads(threads)
+        assert torch.equal(one, got)
+        flat = fused.scale_mix(feat, mixer, [torch.full((1003, c), 0.25)] * scales)
+        close(flat, torch.full((1003, c), 0.25), 2e-7 * scales)
+    with pytest.raises(RuntimeError, match="results for"):
+        fused.scale_mix(feat, mixer, outs[:-1] + [outs[0]] * 2)
 
 
 @pytest.mark.parametrize("config", ["cpu-small-pd", "cpu-small", "cpu-small-pdl-gall", "cpu-small-pdl-gza",

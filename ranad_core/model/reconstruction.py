@@ -215,8 +215,12 @@ class Reconstruction(nn.Module):
         # stage 3: per-bin convex mix of the scales, a softmax over each bin's row of 2-3 scales. (Over the scales of
         # the [scales, N] view torch vectorises over the bins, 1.6x as fast, but splits the bins among the threads
         # with vector and scalar tails at the splits: the weights then changed with the thread count, by an ulp.)
-        w = torch.softmax(self.mixer(feat), dim=1).t()
-        out = sum(w[s, :, None] * outs[s] for s in range(self.scales))
+        # Inference on the CPU: the mixer, the softmax and the mix in one C++ pass, a row per thread (fused.py).
+        if fused.active(feat, self.per_scale[0].backend) and outs[0].dim() == 2:
+            out = fused.scale_mix(feat, self.mixer, outs)
+        else:
+            w = torch.softmax(self.mixer(feat), dim=1).t()
+            out = sum(w[s, :, None] * outs[s] for s in range(self.scales))
         if self.residual is not None:
             if out.shape[1] != 1:
                 raise ValueError(f"a residual reconstruction has one channel (alpha), got values of {out.shape[1]}")
