@@ -3,7 +3,6 @@ frames; a rerun with --skip-existing completes the shot, and every frame equals 
 
 from __future__ import annotations
 
-import os
 import shutil
 import signal
 import subprocess

@@ -8,12 +8,11 @@ from pathlib import Path
 
 import numpy as np
 import OpenEXR
-import pytest
 from click.testing import CliRunner
 
 from ranad_cli.main import cli
 from ranad_core.exr import fast, read_deep, read_layout, write_parts
-from ranad_core.exr.header import Attribute, encode_int, encode_string
+from ranad_core.exr.header import encode_int, encode_string
 from real_data import shared
 from test_defects import tiny  # noqa: F401  (the fixture)
 
