@@ -421,6 +421,18 @@ def _denoise_window(model, images, centre, mapping, tile, halo, keep_noisy, want
                        centre)
 
 
+def write_columns(values: np.ndarray, channels: list, names, data) -> None:
+    """values[:, channel of names[i]] = data[:, i] for every i, in place, as if written one by one in order (a
+    channel named twice keeps its last column). In one threaded pass over the rows (torch's index_copy_): a numpy
+    write per column was a strided pass over the whole frame each, 0.6 s of a 6.5 M-bin, 38-channel frame against
+    0.07 s."""
+    last = {channels.index(name): i for i, name in enumerate(names)}
+    block = np.ascontiguousarray(data, dtype=np.float32).reshape(len(values), len(names))
+    if len(last) < len(names):
+        block = np.ascontiguousarray(block[:, list(last.values())])
+    torch.from_numpy(values).index_copy_(1, torch.tensor(list(last), dtype=torch.int64), torch.from_numpy(block))
+
+
 def _assemble(img: DeepImage, m: ChannelMap, srt: DeepImage, perm: np.ndarray, outs: dict,
               keep_noisy: str | None, groups: Groups | None = None, factors: np.ndarray | None = None,
               dark_radius: int = 0) -> DeepImage:
@@ -433,11 +445,7 @@ def _assemble(img: DeepImage, m: ChannelMap, srt: DeepImage, perm: np.ndarray, o
     replaced = []
 
     def write(names, data):
-        # the columns in one threaded pass over the rows (torch's index_copy_): a numpy write per column was a
-        # strided pass over the whole frame each, 0.6 s of a 6.5 M-bin, 38-channel frame against 0.07 s
-        cols = torch.tensor([ch.index(name) for name in names], dtype=torch.int64)
-        block = torch.from_numpy(np.ascontiguousarray(data, dtype=np.float32).reshape(len(file_vals), len(names)))
-        torch.from_numpy(file_vals).index_copy_(1, cols, block)
+        write_columns(file_vals, ch, names, data)
         replaced.extend(names)
 
     def back(a):   # sorted (merged) order -> file order (read only here, so not copied when already in order)

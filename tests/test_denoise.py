@@ -257,3 +257,25 @@ def test_tile_choice_fits_the_budget_and_computes_the_fewest_bins(shape, limit_p
         assert len(chosen) == 1
     if shape == (1080, 1920) and limit_px == 1.2e6:
         assert old == 960 and sum(chosen) < 0.98 * sum(_haloed_bins_by_hand(counts, old, halo))
+
+
+def test_write_columns_is_the_column_by_column_write():
+    """The assembly's column writer equals numpy writes one column at a time in order, a channel named twice
+    keeping its last column (a grey layer mapped as Y,Y,Y), 1-D data as one column, other channels untouched."""
+    from ranad_core.denoise import write_columns
+
+    rng = np.random.default_rng(3)
+    chans = ["R", "G", "B", "A", "Z", "spec.Y"]
+    base = rng.normal(size=(257, len(chans))).astype(np.float32)
+    for names in (["R", "G", "B"], ["spec.Y", "spec.Y", "spec.Y"], ["Z", "R", "Z"], ["A"]):
+        data = rng.normal(size=(257, len(names)))   # float64: written as float32, as numpy's assignment casts
+        got, want = base.copy(), base.copy()
+        write_columns(got, chans, names, data)
+        for i, name in enumerate(names):
+            want[:, chans.index(name)] = data[:, i]
+        np.testing.assert_array_equal(got, want)
+    got, want = base.copy(), base.copy()
+    one = rng.normal(size=257).astype(np.float32)
+    write_columns(got, chans, ["A"], one)
+    want[:, 3] = one
+    np.testing.assert_array_equal(got, want)
