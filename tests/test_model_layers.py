@@ -46,6 +46,31 @@ def test_bin_dropout_is_computed_once_per_layout_pattern_and_level():
                 assert torch.equal(coarse.pixels, fresh.pixels)
 
 
+def test_kept_rows_are_gathered_once_per_features_at_inference():
+    """kept_rows is feat[kept]; at inference a second call on the same features returns the same tensor (the output
+    layers' reconstructions share it), other features or another dropout their own rows, and with gradients on
+    nothing is kept (each call its own graph node)."""
+    from ranad_core.model.layers import kept_rows
+
+    lay = layout()
+    feat, other = torch.randn(lay.bins, 5), torch.randn(lay.bins, 5)
+    with torch.inference_mode():
+        for pattern, level, lattice in ((0, 1, True), (1, 2, True), (1, 1, False)):
+            kept = bin_dropout(lay, pattern, level, lattice)[0]
+            rows = kept_rows(lay, pattern, level, lattice, feat)
+            assert torch.equal(rows, feat[kept])
+            assert kept_rows(lay, pattern, level, lattice, feat) is rows
+            theirs = kept_rows(lay, pattern, level, lattice, other)
+            assert theirs is not rows and torch.equal(theirs, other[kept])
+    lay = layout()
+    w = torch.randn(lay.bins, 5, requires_grad=True)
+    first, second = kept_rows(lay, 0, 1, True, w), kept_rows(lay, 0, 1, True, w)
+    assert first is not second and not lay.gathers
+    (first.sum() + second.sum()).backward()
+    kept = bin_dropout(lay, 0, 1, True)[0]
+    assert torch.equal(w.grad[kept], torch.full((len(kept), 5), 2.0))
+
+
 def test_lattice_dropout_keeps_single_bin_pixels_on_ever_sparser_lattices():
     """A frame of single-bin pixels, four down-sampling levels, both patterns at each level: with the lattice,
     level L keeps exactly 1/2^L of the pixels, each level's bins are a subset of the level above's, and from level

@@ -27,6 +27,7 @@ class Layout:
     width: int
     pixels: torch.Tensor
     dropouts: dict = field(default_factory=dict, repr=False, compare=False)
+    gathers: dict = field(default_factory=dict, repr=False, compare=False)   # kept_rows' results
 
     @classmethod
     def of(cls, offsets: torch.Tensor, height: int, width: int) -> "Layout":
@@ -69,6 +70,22 @@ def bin_dropout(layout: Layout, pattern: int, level: int = 1, lattice: bool = Fa
     if key not in layout.dropouts:
         layout.dropouts[key] = _bin_dropout(layout, pattern, level, lattice)
     return layout.dropouts[key]
+
+
+def kept_rows(layout: Layout, pattern: int, level: int, lattice: bool, feat: torch.Tensor) -> torch.Tensor:
+    """feat[kept] for bin_dropout(layout, pattern, level, lattice)'s kept bins. At inference the rows are gathered
+    once per layout, dropout and feature tensor: every output layer's reconstruction gathers the same embeddings'
+    rows for its pyramid (four gathers of one [N, dim] tensor per scale, 0.3 s of a 2.9 M-bin frame)."""
+    kept = bin_dropout(layout, pattern, level, lattice)[0]
+    if torch.is_grad_enabled():
+        return feat[kept]
+    key = (pattern, level if lattice else 1, lattice)
+    hit = layout.gathers.get(key)
+    if hit is not None and hit[0] is feat:
+        return hit[1]
+    rows = feat[kept]
+    layout.gathers[key] = (feat, rows)
+    return rows
 
 
 def _bin_dropout(layout: Layout, pattern: int, level: int, lattice: bool) -> tuple[torch.Tensor, Layout]:

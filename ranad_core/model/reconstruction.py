@@ -29,7 +29,7 @@ from torch import nn
 
 from ..rana import rana
 from . import fused
-from .layers import Layout, bin_dropout
+from .layers import Layout, bin_dropout, kept_rows
 
 GATE_WIDTH_FLOOR = 0.02   # narrowest gate half-width in log depth (2%): keeps lambda |log z|^2 within fp32's reach
 GATE_STRENGTH = 4.0       # lambda = GATE_STRENGTH / half-width^2: a bin one gap away (the other layer) gets e^-16
@@ -202,7 +202,7 @@ class Reconstruction(nn.Module):
         guides = [guide]
         for s in range(self.scales - 1):  # stage 1: the pyramid of blurred layers
             kept, coarse = bin_dropout(layouts[-1], s % 2, s + 1, self.lattice)
-            q_feat = feats[-1][kept]
+            q_feat = kept_rows(layouts[-1], s % 2, s + 1, self.lattice, feats[-1])   # shared by the layers
             g = guides[-1]
             images.append(self.down[s](q_feat, feats[-1], coarse.pixels, layouts[-1], images[-1],
                                        None if g is None else (g[0][kept], g[1])))
