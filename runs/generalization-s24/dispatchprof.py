@@ -18,6 +18,6 @@ class Mode(TorchDispatchMode):
 import ranad_core.denoise as D
 real = D._tile_inputs
 with Mode():
-    t = time.time(); denoise_frame(m, img, tile=512, halo=16); print("wall", time.time() - t)
+    t = time.time(); denoise_frame(m, img, tile=int(sys.argv[2]) if len(sys.argv) > 2 else None, halo=16); print("wall", time.time() - t)
 for k, v in sorted(T.items(), key=lambda kv: -kv[1])[:30]:
     print(f"{v:7.3f} s {N[k]:5d}  {k[0]:28s} {k[1]}")
