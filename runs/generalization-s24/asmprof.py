@@ -1,4 +1,5 @@
-"""cProfile of denoise._assemble on one frame (session 24 investigation)."""
+"""cProfile of denoise._assemble on one frame (session 24 investigation).
+Usage: python asmprof.py FRAME.exr [DENOISE OPTIONS]"""
 import cProfile, pstats, sys
 import ranad_core.denoise as D
 real = D._assemble

@@ -1,4 +1,5 @@
-"""Self time of aten ops in the tiles by calling line (TorchDispatchMode), session 24 investigation."""
+"""Self time of aten ops in the tiles by calling line (TorchDispatchMode), session 24 investigation.
+Usage: python dispatchprof.py FRAME.exr [TILE]   (default model, 16-px halo; TILE: None for the whole frame)"""
 import sys, time, traceback, collections, torch
 from torch.utils._python_dispatch import TorchDispatchMode
 from ranad_core.exr import read_deep

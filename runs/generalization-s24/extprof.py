@@ -1,4 +1,5 @@
-"""Time spent in each C++ extension entry point during `ranad denoise` (session 24 investigation)."""
+"""Time spent in each C++ extension entry point during `ranad denoise` (session 24 investigation).
+Usage: python extprof.py FRAME.exr [DENOISE OPTIONS]   (with ranad_core importable)"""
 import sys, time, collections
 import ranad_core.rana.extension as E
 real = E.cpu_extension_or_none()
