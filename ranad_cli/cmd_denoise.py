@@ -114,7 +114,8 @@ def parse_bytes(text: str) -> float:
 @click.option("--profile", "profile", is_flag=True,
               help="After the run, print where the time went: seconds per stage (read, motion, inputs with the "
                    "flat prior, per-tile gather / backbone / reconstruction / scatter, assemble, AOVs, cache, "
-                   "write) and a per-tile summary (bins with the halo, halo overlap, seconds per tile).")
+                   "write) with the CPU seconds of each and the threads it kept busy (near 1: a serial stage), "
+                   "and a per-tile summary (bins with the halo, halo overlap, seconds per tile).")
 def denoise_cmd(inputs, output, frames, model, device, threads, kind, maps, preset, motion_units, fps, shutter,
                 motion_y, keep_noisy, keep_depth, bin_merge, dark_radius, tile, halo, max_memory, cache_dir,
                 skip_existing, shard, strict, window, aovs, reference, parts, flow, flow_direction, flow_channels,
