@@ -83,7 +83,9 @@ def _spp_weight(text: str) -> tuple[int, float]:
                   f"{k}={v:g}" for k, v in WEIGHTS.items()) + ". 'separation' compares the composites of the bins in "
                   "front of and behind the crop's median depth, each alone (what a holdout sees); 'separation_ssim' "
                   "adds the SSIM term on those two composites; 'edit' and 'edit_ssim' score the compositing edit "
-                  "that `ranad eval` scores (front recoloured, a layer inserted at that depth).")
+                  "that `ranad eval` scores (front recoloured, a layer inserted at that depth); 'composite_grad' "
+                  "compares the tone-mapped composite's pixel-to-pixel differences (fine detail) with the "
+                  "reference's.")
 @click.option("--spp-weight", "spp_weights", multiple=True, metavar="SPP=W",
               help="Relative odds of drawing a training crop of that sample count (repeatable; counts not named "
                    "weigh 1), e.g. 64=2 to show clean renders twice as often, where the model over-smooths them.")

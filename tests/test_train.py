@@ -413,6 +413,32 @@ def test_edit_loss_sees_front_alpha_the_composite_hides_less():
     assert on["edit"] > 0.02 and on["edit_ssim"] > 0
 
 
+def test_composite_grad_charges_blur_more_than_fine_noise():
+    """The gradient term, on a sharp-edged reference: SMAPE prefers a blur of the edge to a fine noise (the trade
+    section 4 of runs/generalization-s24 found the training making), the gradient term the noise; it is zero for the
+    reference itself, computed only when weighted, and its gradient reaches the prediction."""
+    from ranad_core.train.losses import gradient_l1, smape, total_loss
+
+    g = torch.Generator().manual_seed(2)
+    ref = torch.zeros(3, 16, 16)
+    ref[:, :, 8:] = 0.8                                                    # a vertical edge
+    blur = torch.nn.functional.avg_pool2d(ref[None], 5, 1, 2, count_include_pad=False)[0]
+    noise = ref + 0.02 * torch.randn(3, 16, 16, generator=g)
+    assert gradient_l1(ref, ref).item() == 0
+    assert smape(blur, ref).item() < smape(noise, ref).item()
+    assert gradient_l1(blur, ref).item() > gradient_l1(noise, ref).item() * 1.5
+
+    layers, _, offsets = _random_layers(7, pixels=64)
+    pred = {k: v.clone().requires_grad_(k == "diffuse") for k, v in layers.items()}
+    pred_noisy = {**pred, "diffuse": pred["diffuse"] * (1 + 0.3 * torch.rand(pred["diffuse"].shape, generator=g))}
+    _, same = total_loss(layers, layers, offsets, (8, 8), weights={"composite_grad": 1.0})
+    _, off = total_loss(pred_noisy, layers, offsets, (8, 8))
+    loss, on = total_loss(pred_noisy, layers, offsets, (8, 8), weights={"composite_grad": 1.0})
+    assert same["composite_grad"] == 0 and "composite_grad" not in off and on["composite_grad"] > 0
+    loss.backward()
+    assert pred["diffuse"].grad is not None and pred["diffuse"].grad.abs().sum() > 0
+
+
 def test_separation_ssim_sees_structure_moved_between_depth_layers():
     """8x8 pixels, each a transparent front bin (alpha 0) over an opaque back bin; the reference's front layer holds
     a checker. Moving the front colour into the back bin on the checker's dark squares leaves every composite

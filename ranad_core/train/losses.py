@@ -9,7 +9,10 @@ semi-transparent layer inserted at the median depth, then flattened; SMAPE (`edi
 (`edit_ssim`) on it. The edit weighs the front composite's alpha (how much of the inserted layer and the back shows
 through), which the per-bin alpha L1 and the separation terms see only indirectly. For cross-frame
 training on consecutive frames, a temporal term: L1 between the change of the tone-mapped composite from one frame
-to the next and the reference's change (the flicker that `ranad eval --temporal` measures)."""
+to the next and the reference's change (the flicker that `ranad eval --temporal` measures). And (weight 0 by
+default) `composite_grad`: L1 between the tone-mapped composite's differences of neighbouring pixels and the
+reference's, the fine detail (an edge seen through a pane) that FLIP weighs and that the SMAPE terms trade for
+residual noise once the noise is low (runs/generalization-s24, section 4)."""
 
 from __future__ import annotations
 
@@ -22,6 +25,13 @@ from .weights import WEIGHTS
 
 def smape(pred: torch.Tensor, target: torch.Tensor, eps: float = 1e-2) -> torch.Tensor:
     return ((pred - target).abs() / (pred.abs() + target.abs() + eps)).mean()
+
+
+def gradient_l1(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
+    """Mean L1 between the horizontal and vertical differences of neighbouring pixels of two [C, H, W] images."""
+    dx = (a[:, :, 1:] - a[:, :, :-1]) - (b[:, :, 1:] - b[:, :, :-1])
+    dy = (a[:, 1:, :] - a[:, :-1, :]) - (b[:, 1:, :] - b[:, :-1, :])
+    return (dx.abs().mean() + dy.abs().mean()) / 2
 
 
 def composite_rgba(layers: dict, offsets: torch.Tensor) -> torch.Tensor:
@@ -98,6 +108,8 @@ def total_loss(pred: dict, ref: dict, offsets: torch.Tensor, size: tuple[int, in
     parts["composite"] = smape(cp, cr)
     if structure:
         parts["composite_ssim"] = 1 - ssim(img(cp), img(cr))
+    if weights["composite_grad"] > 0 and h >= 2 and w >= 2:
+        parts["composite_grad"] = gradient_l1(img(cp), img(cr))
     loss = sum(weights[k] * v for k, v in parts.items())
     return loss, {k: v.item() for k, v in parts.items()}
 
