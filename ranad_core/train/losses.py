@@ -106,10 +106,13 @@ def total_loss(pred: dict, ref: dict, offsets: torch.Tensor, size: tuple[int, in
                 parts["edit_ssim"] = 1 - ssim(shaped(ep), shaped(er))   # edit_image divided by scale already
     cp, cr = composite(pred, offsets), composite(ref, offsets)
     parts["composite"] = smape(cp, cr)
-    if structure:
-        parts["composite_ssim"] = 1 - ssim(img(cp), img(cr))
-    if weights["composite_grad"] > 0 and h >= 2 and w >= 2:
-        parts["composite_grad"] = gradient_l1(img(cp), img(cr))
+    grad = weights["composite_grad"] > 0 and h >= 2 and w >= 2
+    if structure or grad:
+        ip, ir = img(cp), img(cr)                              # tone-mapped once for both image terms
+        if structure:
+            parts["composite_ssim"] = 1 - ssim(ip, ir)
+        if grad:
+            parts["composite_grad"] = gradient_l1(ip, ir)
     loss = sum(weights[k] * v for k, v in parts.items())
     return loss, {k: v.item() for k, v in parts.items()}
 
