@@ -440,9 +440,9 @@ def replace_nonfinite(image: DeepImage, depth: Sequence[str] = ("Z", "ZBack")) -
     becomes that channel's largest finite value in the image (0 if it has none), any other non-finite value 0.
     Returns (the image, unchanged when all values are finite; the number of bins that had a non-finite value)."""
     vals = image.values
-    if all_finite(vals):
+    n = nonfinite_bins(vals)
+    if not n:
         return image, 0
-    n = int((~np.isfinite(vals)).any(axis=1).sum())
     vals = vals.copy()
     for col in depth:
         if col in image.channels:
@@ -469,6 +469,14 @@ def all_finite(values: np.ndarray) -> bool:
         if not np.isfinite(block, out=scratch[:block.size]).all():
             return False
     return True
+
+
+def nonfinite_bins(values: np.ndarray) -> int:
+    """Rows (bins) of values [N, C] with a NaN or Inf in any column; the common all-finite case checked chunk-wise
+    (all_finite) without a frame-sized boolean array."""
+    if all_finite(values):
+        return 0
+    return int((~np.isfinite(values)).any(axis=1).sum())
 
 
 def copy_values(values: np.ndarray) -> np.ndarray:

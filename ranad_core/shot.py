@@ -283,13 +283,9 @@ def output_compression(img) -> str:
 
 def count_nonfinite(img) -> int:
     """Bins with a NaN/Inf value in any channel (what deep.replace_nonfinite replaces)."""
-    import numpy as np
+    from .deep import nonfinite_bins
 
-    from .deep import all_finite
-
-    if not img.num_bins or all_finite(img.values):
-        return 0
-    return int((~np.isfinite(img.values)).any(axis=1).sum())
+    return nonfinite_bins(img.values) if img.num_bins else 0
 
 
 NEGATIVE_DEPTH_SHARE = 0.001   # more bins than this behind the camera: a depth convention, not a stray sample

@@ -19,6 +19,7 @@ from ranad_core.deep import (
     all_finite,
     associated_alpha,
     copy_values,
+    nonfinite_bins,
     flatten,
     flatten_torch,
     gather_bins,
@@ -431,6 +432,9 @@ def test_all_finite_finds_one_bad_value_anywhere(bad, monkeypatch):
         assert not all_finite(w), at
         assert all_finite(w[:, ::2]) == ((at % 7) % 2 == 1), at   # a strided view: its column kept or not
     assert all_finite(np.full(3, 7.0, np.float16)) and not all_finite(np.full(3, np.inf, np.float16))
+    w = v.copy()
+    w[[3, 3, 200], [0, 5, 6]] = bad                 # two bad values in one bin, one in another
+    assert nonfinite_bins(w) == 2 and nonfinite_bins(v) == 0
 
 
 def test_copy_values_is_an_equal_independent_array():
