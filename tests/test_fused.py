@@ -81,9 +81,10 @@ def test_bad_shapes_are_refused():
 
 
 @pytest.mark.parametrize("heads,d", [(2, 8), (4, 16), (1, 3)])
-def test_wide_operand_equals_the_python_assembly(heads, d):
-    """The gated kernels' wide q and k operands from the one-pass op equal, bit for bit, the ones _with_range
-    writes block by block (projection scaled, gate terms on every head, zeros), in the same channel-major layout."""
+def test_wide_operand_equals_the_python_assembly(heads, d, monkeypatch):
+    """The gated kernels' wide q and k operands from the one-pass op (what _with_range uses at inference) equal, bit
+    for bit, the ones _with_range writes block by block without it (projection scaled, gate terms on every head,
+    zeros), in the same channel-major layout."""
     from ranad_core.model.reconstruction import KernelAttention, gate_terms, wide_dim
 
     torch.manual_seed(heads)
@@ -92,15 +93,19 @@ def test_wide_operand_equals_the_python_assembly(heads, d):
     q, k = torch.randn(nq, d * heads), torch.randn(nk, d * heads)
     a, b = torch.randn(nq, 3), torch.randn(nk, 3)
     a[:, -1], b[:, -1] = a[:, -1].abs() * 50, b[:, -1].abs() * 50     # lambdas, non-negative
+    views = q.view(nq, d, heads).transpose(1, 2), k.view(nk, d, heads).transpose(1, 2)
     with torch.inference_mode():
-        qa, kb = mod._with_range(q.view(nq, d, heads).transpose(1, 2), k.view(nk, d, heads).transpose(1, 2), (a, b))
+        fq2, fk2 = mod._with_range(*views, (a, b))             # the fused path
+        monkeypatch.setenv("RANAD_NO_FUSED", "1")
+        qa, kb = mod._with_range(*views, (a, b))               # block by block
+        monkeypatch.delenv("RANAD_NO_FUSED")
         tq, tk = gate_terms(a, b)
         wide = wide_dim(d, tq.shape[1])
         s = wide ** 0.5
         fq = fused.wide_operand(q, heads, s / d ** 0.5, tq, s, wide)
         fk = fused.wide_operand(k, heads, 1.0, tk, 1.0, wide)
     assert fq.shape == qa.shape == (nq, heads, wide) and fk.shape == kb.shape == (nk, heads, wide)
-    assert torch.equal(fq, qa) and torch.equal(fk, kb)
+    assert torch.equal(fq, qa) and torch.equal(fk, kb) and torch.equal(fq2, qa) and torch.equal(fk2, kb)
     assert fq.transpose(1, 2).is_contiguous()    # channel-major, as the kernels stream it
     with pytest.raises(RuntimeError, match="do not fit"):
         fused.wide_operand(q, heads, 1.0, torch.randn(nq, wide), 1.0, wide)

@@ -130,6 +130,9 @@ class KernelAttention(nn.Module):
         extra = sum(t.shape[2] for t in qs)
         wide = wide_dim(d, extra)
         s = math.sqrt(wide)
+        if self.range is None and fused.active(q, self.backend):   # the gate's columns alone: one C++ pass each
+            return (fused.wide_operand(q.transpose(1, 2).reshape(nq, d * H), H, s / math.sqrt(d), qs[0][:, 0], s, wide),
+                    fused.wide_operand(k.transpose(1, 2).reshape(nk, d * H), H, 1.0, ks[0][:, 0], 1.0, wide))
         # written channel-major ([N, d', H], returned as its [N, H, d'] view), the layout the kernels stream
         # without a copy, as the projections themselves are (layers.py)
         qa, ka = q.new_empty(nq, wide, H), k.new_empty(nk, wide, H)
@@ -152,15 +155,8 @@ class KernelAttention(nn.Module):
         stream), so the op copies no operand."""
         H, d = self.heads, self.head_dim
         (q,), (k,) = fused.ln_linear(q_feat, None, [self.q]), fused.ln_linear(k_feat, None, [self.k])
-        if self.gated and self.range is None and guide is not None:   # _with_range's operands, one pass each
-            tq, tk = gate_terms(*guide)
-            wide = wide_dim(d, tq.shape[1])
-            s = math.sqrt(wide)
-            q = fused.wide_operand(q, H, s / math.sqrt(d), tq, s, wide)
-            k = fused.wide_operand(k, H, 1.0, tk, 1.0, wide)
-        else:
-            q, k = (x.view(len(x), d, H).transpose(1, 2) for x in (q, k))
-            q, k = self._with_range(q, k, guide)
+        q, k = (x.view(len(x), d, H).transpose(1, 2) for x in (q, k))
+        q, k = self._with_range(q, k, guide)
         v = values[:, :, None].expand(-1, -1, H).contiguous().transpose(1, 2)   # channel-major [N, H, C]
         y = rana(q, k, v, q_pixels, keys.offsets, keys.size, self.radius, self.bias, backend=self.backend)
         mix = torch.softmax(self.head_mix, 0)
@@ -216,7 +212,7 @@ class Reconstruction(nn.Module):
         # the [scales, N] view torch vectorises over the bins, 1.6x as fast, but splits the bins among the threads
         # with vector and scalar tails at the splits: the weights then changed with the thread count, by an ulp.)
         # Inference on the CPU: the mixer, the softmax and the mix in one C++ pass, a row per thread (fused.py).
-        if fused.active(feat, self.per_scale[0].backend) and outs[0].dim() == 2:
+        if fused.active(feat, self.per_scale[0].backend):
             out = fused.scale_mix(feat, self.mixer, outs)
         else:
             w = torch.softmax(self.mixer(feat), dim=1).t()
