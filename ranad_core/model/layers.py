@@ -66,10 +66,15 @@ def bin_dropout(layout: Layout, pattern: int, level: int = 1, lattice: bool = Fa
     all fail the other pattern), so on a typical frame it holds a few percent of the bins, those of multi-bin
     pixels only. Returns (kept row indices into the fine layout, the coarse layout).
     """
-    key = (pattern, level if lattice else 1, lattice)   # without the lattice, every level drops alike
+    key = _dropout_key(pattern, level, lattice)
     if key not in layout.dropouts:
         layout.dropouts[key] = _bin_dropout(layout, pattern, level, lattice)
     return layout.dropouts[key]
+
+
+def _dropout_key(pattern: int, level: int, lattice: bool) -> tuple:
+    """The cache key of a dropout on a layout: without the lattice, every level drops alike."""
+    return (pattern, level if lattice else 1, lattice)
 
 
 def kept_rows(layout: Layout, pattern: int, level: int, lattice: bool, feat: torch.Tensor) -> torch.Tensor:
@@ -79,7 +84,7 @@ def kept_rows(layout: Layout, pattern: int, level: int, lattice: bool, feat: tor
     kept = bin_dropout(layout, pattern, level, lattice)[0]
     if torch.is_grad_enabled():
         return feat[kept]
-    key = (pattern, level if lattice else 1, lattice)
+    key = _dropout_key(pattern, level, lattice)
     hit = layout.gathers.get(key)
     if hit is not None and hit[0] is feat:
         return hit[1]
