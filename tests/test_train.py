@@ -732,3 +732,30 @@ def test_rotate_normals_draws_only_when_asked(tmp_path):
                                  "--rotate-normals", "0.5"])
     assert r.exit_code == 0, r.output
     assert torch.load(run / "checkpoint.pt", weights_only=False)["train_config"]["p_rotate_normals"] == 0.5
+
+
+def test_composite_coarse_charges_lost_energy():
+    """The coarse term, on a block that is evenly lit in the reference: a firefly that kept its energy and the even
+    light itself cost nothing, a dimmed firefly (the energy the held-out glass scenes lost) does, while per-pixel
+    SMAPE scores the dimmed and the kept firefly alike; it is computed only when weighted, and its gradient
+    reaches the prediction."""
+    from ranad_core.train.losses import coarse_smape, smape, total_loss
+
+    ref = torch.ones(3, 8, 8)
+    kept, dimmed = torch.zeros(3, 8, 8), torch.zeros(3, 8, 8)
+    kept[:, 3, 4], dimmed[:, 3, 4] = 64.0, 8.0                   # the block's whole energy, and an eighth of it
+    assert coarse_smape(ref, ref).item() == 0
+    assert coarse_smape(kept, ref, (8,)).item() == pytest.approx(0, abs=1e-6)
+    assert coarse_smape(dimmed, ref, (8,)).item() > 0.5
+    assert smape(dimmed, ref).item() == pytest.approx(smape(kept, ref).item(), abs=0.01)
+    assert coarse_smape(torch.ones(3, 6, 6), torch.ones(3, 6, 6), (4,)).item() == 0   # partial edge blocks
+
+    layers, _, offsets = _random_layers(7, pixels=64)
+    pred = {k: v.clone().requires_grad_(k == "diffuse") for k, v in layers.items()}
+    darker = {**pred, "diffuse": pred["diffuse"] * 0.5}
+    _, same = total_loss(layers, layers, offsets, (8, 8), weights={"composite_coarse": 1.0})
+    _, off = total_loss(darker, layers, offsets, (8, 8))
+    loss, on = total_loss(darker, layers, offsets, (8, 8), weights={"composite_coarse": 1.0})
+    assert same["composite_coarse"] == 0 and "composite_coarse" not in off and on["composite_coarse"] > 0
+    loss.backward()
+    assert pred["diffuse"].grad is not None and pred["diffuse"].grad.abs().sum() > 0
