@@ -31,5 +31,6 @@ for sc in sorted(os.listdir(root)):
         lr = metrics.flat_rgb(ref) @ LUMA
         bright = lr > np.median(lr[lr > 0])
         lums = [f @ LUMA for f in (metrics.flat_rgb(noisy), metrics.flat_rgb(out), oidn_flat(noisy))]
-        cells = [f"{x[bright].sum() / lr[bright].sum():.3f}" for x in lums] + [f"{x.sum() / lr.sum():.3f}" for x in lums]
+        cells = ([f"{x[bright].sum() / lr[bright].sum():.3f}" for x in lums]
+                 + [f"{x.sum() / lr.sum():.3f}" for x in lums])
         print(f"| {sc} | {spp} | " + " | ".join(cells) + " |", flush=True)
