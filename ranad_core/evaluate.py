@@ -26,7 +26,11 @@ from .train.data import find_pairs
 METHODS = ("noisy", "oidn", "recolour", "ranad")
 FLAT = ("smape", "dssim", "flip")
 DEEP = ("bin_smape", "z_rel", "comp_flip", "comp_smape", "sep_smape", "sep_dssim")
-COLUMNS = ("scene", "family", "group", "exposure", "kind", "spp", "method", *FLAT, *DEEP, "seconds")
+COLUMNS = ("scene", "family", "group", "exposure", "kind", "spp", "ref_spp", "method", *FLAT, *DEEP, "seconds")
+# A reference with fewer than this many times its input's samples is noisy enough to be part of every score against
+# it: at 8x, two tracings of a glass scene's reference differ by three quarters of what a 64-spp input does
+# (runs/generalization-s25, section 3).
+REF_SPP_RATIO = 16
 
 
 def radiance_channels(channels) -> list:
@@ -54,15 +58,27 @@ def exposed(img, stops: float):
     return img.with_values(vals)
 
 
-def scene_family(pair) -> str:
-    """The scene family (synth preset) of a pair, from its scene's manifest."""
+def scene_manifest(pair) -> dict:
+    """A pair's scene manifest ({} where it cannot be read)."""
     import json
 
     manifest = pair.noisy.parent.parent / "manifest.json"
     try:
-        return json.loads(manifest.read_text()).get("preset", "?")
+        m = json.loads(manifest.read_text())
     except (OSError, ValueError):
-        return "?"
+        return {}
+    return m if isinstance(m, dict) else {}
+
+
+def scene_family(pair) -> str:
+    """The scene family (synth preset) of a pair, from its scene's manifest."""
+    return scene_manifest(pair).get("preset", "?")
+
+
+def reference_spp(pair) -> int:
+    """Samples per pixel of a pair's reference, from its scene's manifest (0: not recorded)."""
+    v = scene_manifest(pair).get("ref_spp", 0)
+    return int(v) if isinstance(v, (int, float)) and v > 0 else 0
 
 
 @dataclass
@@ -90,7 +106,7 @@ def evaluate(dataset: str, model, spps=None, kinds=None, max_scenes: int | None 
         pairs = [p for p in pairs if p.scene in keep]
     result = Result()
     for pair, stops in ((p, e) for p in pairs for e in exposures):
-        family = scene_family(pair)
+        family, ref_spp = scene_family(pair), reference_spp(pair)
         group = "held-out" if family in held_out else "in-family"
         noisy, ref = exposed(read_deep(pair.noisy), stops), read_deep(pair.reference)
         z = metrics.split_depth(ref)
@@ -115,7 +131,7 @@ def evaluate(dataset: str, model, spps=None, kinds=None, max_scenes: int | None 
             deep = not isinstance(out, np.ndarray)
             flats[method] = metrics.flat_rgb(out) if deep else out
             row = {"scene": pair.scene, "family": family, "group": group, "exposure": stops, "kind": pair.kind,
-                   "spp": pair.spp, "method": method,
+                   "spp": pair.spp, "ref_spp": ref_spp, "method": method,
                    **metrics.flat_scores(flat_ref, flats[method]),
                    **(metrics.deep_scores(ref, out, z) if deep else dict.fromkeys(DEEP, math.nan)),
                    "seconds": seconds[method]}
@@ -237,7 +253,20 @@ def grouped_markdown(rows: list, title: str = "") -> str:
         parts += ["", "### per family (means over kinds and exposures; oidn_vs_noisy: flat OIDN's FLIP / the noisy "
                   "input's)", "", "| " + " | ".join(cols) + " |", "|" + "---|" * len(cols)]
         parts += ["| " + " | ".join(_fmt(r[c]) for c in cols) + " |" for r in fr]
+    parts += reference_note(rows)
     return "\n".join(parts) + "\n"
+
+
+def reference_note(rows: list) -> list:
+    """Markdown lines naming the sample counts whose references hold fewer than REF_SPP_RATIO times their input's
+    samples (rows without a recorded reference count are left out): scores there carry the references' own
+    noise, so a method that removes more noise than the reference has gains less than it should."""
+    thin = sorted({(r["spp"], r["ref_spp"]) for r in rows if 0 < r.get("ref_spp", 0) < REF_SPP_RATIO * r["spp"]})
+    if not thin:
+        return []
+    which = ", ".join(f"{spp} spp against {ref} ({ref / spp:.3g}x)" for spp, ref in thin)
+    return ["", f"Reference noise: the references hold fewer than {REF_SPP_RATIO}x their inputs' samples at "
+            f"{which}; the references' own noise is part of every method's score there."]
 
 
 def write_csv(rows: list, path: str, columns=COLUMNS) -> None:

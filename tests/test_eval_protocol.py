@@ -60,3 +60,17 @@ def test_ratios_per_family():
     assert {r["n"] for r in family_ratios(rows) if r["family"] == "glass"} == {3}
     text = grouped_markdown(_rows(), "t")
     assert "| glass | 16 | 2 | 0.5000 | 0.8000 | 0.5000 |" in text
+
+
+def test_reference_note_names_the_sample_counts_whose_references_are_thin():
+    """eval.md says where a reference holds under REF_SPP_RATIO times its input's samples (its own noise then part of
+    every score), and says nothing where every reference is ample or its count was not recorded."""
+    from ranad_core.evaluate import REF_SPP_RATIO, reference_note
+
+    rows = [{**r, "ref_spp": 512} for r in _rows()] + [{**r, "spp": 64, "ref_spp": 512} for r in _rows()]
+    note = "\n".join(reference_note(rows))
+    assert "64 spp against 512 (8x)" in note and "16 spp" not in note          # 32x at 16 spp is ample
+    assert note in grouped_markdown(rows, "t")
+    assert reference_note([{**r, "ref_spp": REF_SPP_RATIO * 16} for r in _rows()]) == []
+    assert reference_note(_rows()) == []                                        # no count recorded
+    assert "Reference noise" not in grouped_markdown(_rows(), "t")
