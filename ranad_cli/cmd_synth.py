@@ -22,7 +22,9 @@ from .params import width_range
 @click.option("--size", default=128, show_default=True, type=click.IntRange(8, 4096), help="Image width and height.")
 @click.option("--frames", default=3, show_default=True, type=click.IntRange(1, 7), help="Frames per scene.")
 @click.option("--spp", default="4,16,64", show_default=True, help="Noisy sample counts, comma-separated.")
-@click.option("--ref-spp", default=1024, show_default=True, type=click.IntRange(1), help="Reference samples.")
+@click.option("--ref-spp", default=1024, show_default=True, type=click.IntRange(1),
+              help="Reference samples. Under 16x the largest --spp the reference's own noise is part of every "
+                   "score against it (`ranad eval` notes it); scenes with caustics (glass, studio) need more.")
 @click.option("--seed", default=0, show_default=True, type=int, help="Dataset seed: same seed, same files.")
 @click.option("--preset", "presets", multiple=True, type=click.Choice(list(FAMILIES)),
               help="Scene presets/families, used in turn (default: easy, medium, deep-heavy). The families "
