@@ -748,7 +748,9 @@ def test_composite_coarse_charges_lost_energy():
     assert coarse_smape(kept, ref, (8,)).item() == pytest.approx(0, abs=1e-6)
     assert coarse_smape(dimmed, ref, (8,)).item() > 0.5
     assert smape(dimmed, ref).item() == pytest.approx(smape(kept, ref).item(), abs=0.01)
-    assert coarse_smape(torch.ones(3, 6, 6), torch.ones(3, 6, 6), (4,)).item() == 0   # partial edge blocks
+    corner = torch.ones(3, 6, 6)
+    corner[:, 5, 5] = 0                                          # light lost in the partial block at the edge
+    assert coarse_smape(corner, torch.ones(3, 6, 6), (4,)).item() > 0
 
     layers, _, offsets = _random_layers(7, pixels=64)
     pred = {k: v.clone().requires_grad_(k == "diffuse") for k, v in layers.items()}

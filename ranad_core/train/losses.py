@@ -15,7 +15,7 @@ reference's, the fine detail (an edge seen through a pane) that FLIP weighs and 
 residual noise once the noise is low (runs/generalization-s24, section 4). And (weight 0 by default)
 `composite_coarse`: SMAPE between the linear composites averaged over blocks of 4 x 4 and 8 x 8 pixels, which
 charges energy a prediction loses (a firefly or caustic speckle dimmed rather than spread over its neighbours: the
-held-out glass scenes lost 10-30% of their input's energy, runs/generalization-s25) while the per-pixel terms
+held-out glass scenes lost 4-31% of their input's energy, runs/generalization-s25) while the per-pixel terms
 cannot tell a dimmed speckle from a kept one."""
 
 from __future__ import annotations
