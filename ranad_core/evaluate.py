@@ -26,7 +26,8 @@ from .train.data import find_pairs
 METHODS = ("noisy", "oidn", "recolour", "ranad")
 FLAT = ("smape", "dssim", "flip")
 DEEP = ("bin_smape", "z_rel", "comp_flip", "comp_smape", "sep_smape", "sep_dssim")
-COLUMNS = ("scene", "family", "group", "exposure", "kind", "spp", "ref_spp", "method", *FLAT, *DEEP, "seconds")
+COLUMNS = ("scene", "family", "group", "exposure", "kind", "spp", "ref_spp", "method", *FLAT, "light", *DEEP,
+           "seconds")
 # A reference with fewer than this many times its input's samples is noisy enough to be part of every score against
 # it: at 8x, two tracings of a glass scene's reference differ by three quarters of what a 64-spp input does
 # (runs/generalization-s25, section 3).
@@ -132,7 +133,7 @@ def evaluate(dataset: str, model, spps=None, kinds=None, max_scenes: int | None 
             flats[method] = metrics.flat_rgb(out) if deep else out
             row = {"scene": pair.scene, "family": family, "group": group, "exposure": stops, "kind": pair.kind,
                    "spp": pair.spp, "ref_spp": ref_spp, "method": method,
-                   **metrics.flat_scores(flat_ref, flats[method]),
+                   **metrics.flat_scores(flat_ref, flats[method]), "light": metrics.light(flat_ref, flats[method]),
                    **(metrics.deep_scores(ref, out, z) if deep else dict.fromkeys(DEEP, math.nan)),
                    "seconds": seconds[method]}
             result.rows.append(row)
@@ -161,8 +162,8 @@ def summary(rows: list) -> list:
             if not sel:
                 continue
             agg = {"spp": spp, "method": method, "n": len(sel)}
-            for k in (*FLAT, *DEEP, "seconds"):
-                vals = [r[k] for r in sel if not math.isnan(r[k])]
+            for k in (*FLAT, "light", *DEEP, "seconds"):
+                vals = [r[k] for r in sel if k in r and not math.isnan(r[k])]
                 agg[k] = float(np.mean(vals)) if vals else math.nan
             out.append(agg)
     return out
@@ -175,10 +176,11 @@ def _fmt(v) -> str:
 
 
 def markdown(rows: list, title: str = "") -> str:
-    """The summary table in Markdown (lower is better everywhere; n/a: the method has no deep output)."""
+    """The summary table in Markdown (lower is better everywhere but in `light`, the image's light over the
+    reference's, best at 1; n/a: the method has no deep output)."""
     s = summary(rows)
-    cols = ("spp", "method", "n", "flip", "smape", "dssim", "bin_smape", "z_rel", "comp_flip", "comp_smape",
-            "sep_smape", "sep_dssim", "seconds")
+    cols = ("spp", "method", "n", "flip", "smape", "dssim", "light", "bin_smape", "z_rel", "comp_flip",
+            "comp_smape", "sep_smape", "sep_dssim", "seconds")
     lines = ([f"### {title}", ""] if title else []) + ["| " + " | ".join(cols) + " |",
                                                       "|" + "---|" * len(cols)]
     lines += ["| " + " | ".join(_fmt(r[c]) for c in cols) + " |" for r in s]

@@ -88,6 +88,15 @@ def flip(ref: np.ndarray, test: np.ndarray) -> float:
     return float(flip_evaluator.evaluate(ref, test, "HDR", applyMagma=False)[1])
 
 
+def light(ref: np.ndarray, test: np.ndarray) -> float:
+    """The light a flat image holds over the reference's: the sum of its Rec. 709 luminance over the reference's
+    (NaN for a black reference). A denoiser that dims fireflies and caustic speckles instead of spreading them
+    scores below 1 where FLIP may still improve (runs/generalization-s25, section 4)."""
+    w = np.array([0.2126, 0.7152, 0.0722], np.float64)
+    r, t = (float((np.nan_to_num(np.asarray(x, np.float64)) @ w).sum()) for x in (ref, test))
+    return t / r if r > 0 else float("nan")
+
+
 def flat_scores(ref: np.ndarray, test: np.ndarray) -> dict:
     return {"smape": smape(ref, test), "dssim": dssim(ref, test), "flip": flip(ref, test)}
 

@@ -60,6 +60,20 @@ def test_metrics_are_zero_on_identical_images_and_grow_with_noise():
     assert 0 < s1["flip"] < s2["flip"] and 0 < s1["smape"] < s2["smape"] and 0 < s1["dssim"] < s2["dssim"]
 
 
+def test_light_is_the_share_of_the_references_luminance():
+    """`light`: a dimmed copy holds its factor of the light, a copy with one pixel's light moved to another the
+    same light (spread or gathered light is not lost), a black reference gives NaN."""
+    flat = metrics.flat_rgb(beauty_image()).astype(np.float64)
+    assert metrics.light(flat, flat) == pytest.approx(1.0)
+    assert metrics.light(flat, 0.5 * flat) == pytest.approx(0.5)
+    moved = flat.copy()
+    ys, xs = np.nonzero(flat.sum(2) > 0)
+    moved[ys[1], xs[1]] += moved[ys[0], xs[0]]
+    moved[ys[0], xs[0]] = 0
+    assert metrics.light(flat, moved) == pytest.approx(1.0)
+    assert np.isnan(metrics.light(np.zeros_like(flat), flat))
+
+
 def _over(bins):
     """Front-to-back 'over' of [(z, (r, g, b), a)] premultiplied point samples at distinct depths (float64)."""
     rgb, acc = np.zeros(3), 0.0
@@ -175,6 +189,7 @@ def test_eval_command_writes_table_csv_and_grid(tmp_path):
     assert [row["method"] for row in rows] == ["noisy", "oidn", "recolour", "ranad"]
     noisy, oidn = rows[0], rows[1]
     assert float(oidn["flip"]) < float(noisy["flip"])          # OIDN really denoised
+    assert 0.5 < float(noisy["light"]) < 2 and "| light |" in (out / "eval.md").read_text()
     assert math.isnan(float(oidn["comp_flip"])) and float(noisy["comp_flip"]) > 0
     assert (out / "grid.png").stat().st_size > 1000 and (out / "eval.md").is_file()
     r = CliRunner().invoke(cli, ["eval", str(ds), "-o", str(out), "--model", str(run), "--spp", "7"])
