@@ -92,8 +92,9 @@ def light(ref: np.ndarray, test: np.ndarray) -> float:
     """The light a flat image holds over the reference's: the sum of its Rec. 709 luminance over the reference's
     (NaN for a black reference). A denoiser that dims fireflies and caustic speckles instead of spreading them
     scores below 1 where FLIP may still improve (runs/generalization-s25, section 4)."""
-    w = np.array([0.2126, 0.7152, 0.0722], np.float64)
-    r, t = (float((np.nan_to_num(np.asarray(x, np.float64)) @ w).sum()) for x in (ref, test))
+    from .model.prior import LUMA   # the luminance the exposure scale uses
+
+    r, t = (float((np.nan_to_num(np.asarray(x, np.float64)) @ LUMA).sum()) for x in (ref, test))
     return t / r if r > 0 else float("nan")
 
 

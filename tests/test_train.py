@@ -417,7 +417,7 @@ def test_composite_grad_charges_blur_more_than_fine_noise():
     """The gradient term, on a sharp-edged reference: SMAPE prefers a blur of the edge to a fine noise (the trade
     section 4 of runs/generalization-s24 found the training making), the gradient term the noise; it is zero for the
     reference itself, computed only when weighted, and its gradient reaches the prediction."""
-    from ranad_core.train.losses import gradient_l1, smape, total_loss
+    from ranad_core.train.losses import gradient_l1, smape
 
     g = torch.Generator().manual_seed(2)
     ref = torch.zeros(3, 16, 16)
@@ -428,13 +428,21 @@ def test_composite_grad_charges_blur_more_than_fine_noise():
     assert smape(blur, ref).item() < smape(noise, ref).item()
     assert gradient_l1(blur, ref).item() > gradient_l1(noise, ref).item() * 1.5
 
+    _check_optional_term("composite_grad", lambda d: d * (1 + 0.3 * torch.rand(d.shape, generator=g)))
+
+
+def _check_optional_term(term: str, spoil) -> None:
+    """An off-by-default loss term on random layers: zero for the reference itself, absent unless weighted, above
+    zero for a prediction whose diffuse layer is spoil(diffuse), and its gradient reaches that prediction."""
+    from ranad_core.train.losses import total_loss
+
     layers, _, offsets = _random_layers(7, pixels=64)
     pred = {k: v.clone().requires_grad_(k == "diffuse") for k, v in layers.items()}
-    pred_noisy = {**pred, "diffuse": pred["diffuse"] * (1 + 0.3 * torch.rand(pred["diffuse"].shape, generator=g))}
-    _, same = total_loss(layers, layers, offsets, (8, 8), weights={"composite_grad": 1.0})
-    _, off = total_loss(pred_noisy, layers, offsets, (8, 8))
-    loss, on = total_loss(pred_noisy, layers, offsets, (8, 8), weights={"composite_grad": 1.0})
-    assert same["composite_grad"] == 0 and "composite_grad" not in off and on["composite_grad"] > 0
+    spoilt = {**pred, "diffuse": spoil(pred["diffuse"])}
+    _, same = total_loss(layers, layers, offsets, (8, 8), weights={term: 1.0})
+    _, off = total_loss(spoilt, layers, offsets, (8, 8))
+    loss, on = total_loss(spoilt, layers, offsets, (8, 8), weights={term: 1.0})
+    assert same[term] == 0 and term not in off and on[term] > 0
     loss.backward()
     assert pred["diffuse"].grad is not None and pred["diffuse"].grad.abs().sum() > 0
 
@@ -739,7 +747,7 @@ def test_composite_coarse_charges_lost_energy():
     light itself cost nothing, a dimmed firefly (the energy the held-out glass scenes lost) does, while per-pixel
     SMAPE scores the dimmed and the kept firefly alike; it is computed only when weighted, and its gradient
     reaches the prediction."""
-    from ranad_core.train.losses import coarse_smape, smape, total_loss
+    from ranad_core.train.losses import coarse_smape, smape
 
     ref = torch.ones(3, 8, 8)
     kept, dimmed = torch.zeros(3, 8, 8), torch.zeros(3, 8, 8)
@@ -752,12 +760,4 @@ def test_composite_coarse_charges_lost_energy():
     corner[:, 5, 5] = 0                                          # light lost in the partial block at the edge
     assert coarse_smape(corner, torch.ones(3, 6, 6), (4,)).item() > 0
 
-    layers, _, offsets = _random_layers(7, pixels=64)
-    pred = {k: v.clone().requires_grad_(k == "diffuse") for k, v in layers.items()}
-    darker = {**pred, "diffuse": pred["diffuse"] * 0.5}
-    _, same = total_loss(layers, layers, offsets, (8, 8), weights={"composite_coarse": 1.0})
-    _, off = total_loss(darker, layers, offsets, (8, 8))
-    loss, on = total_loss(darker, layers, offsets, (8, 8), weights={"composite_coarse": 1.0})
-    assert same["composite_coarse"] == 0 and "composite_coarse" not in off and on["composite_coarse"] > 0
-    loss.backward()
-    assert pred["diffuse"].grad is not None and pred["diffuse"].grad.abs().sum() > 0
+    _check_optional_term("composite_coarse", lambda d: d * 0.5)

@@ -97,7 +97,9 @@ def total_loss(pred: dict, ref: dict, offsets: torch.Tensor, size: tuple[int, in
     parts = {"diffuse": smape(pred["diffuse"], ref["diffuse"]), "specular": smape(pred["specular"], ref["specular"]),
              "alpha": (pred["alpha"] - ref["alpha"]).abs().mean(),
              "depth": ((pred["depth"] - ref["depth"]).abs() / (ref["depth"].abs() + 1e-3)).mean()}
-    shaped = lambda x: tonemap(x).T.reshape(3, h, w)  # noqa: E731
+    # [P, 3] per pixel -> [3, h, w] planes; tone-mapped for the image terms
+    planes = lambda x: x.T.reshape(3, h, w)  # noqa: E731
+    shaped = lambda x: planes(tonemap(x))  # noqa: E731
     img = lambda x: shaped(x / scale)  # noqa: E731
     structure = h >= 4 and w >= 4                             # SSIM needs its window
     wants = {k: weights[k] > 0 and (structure or not k.endswith("ssim"))
@@ -119,7 +121,7 @@ def total_loss(pred: dict, ref: dict, offsets: torch.Tensor, size: tuple[int, in
     parts["composite"] = smape(cp, cr)
     grad = weights["composite_grad"] > 0 and h >= 2 and w >= 2
     if weights["composite_coarse"] > 0:
-        parts["composite_coarse"] = coarse_smape(cp.T.reshape(3, h, w), cr.T.reshape(3, h, w))
+        parts["composite_coarse"] = coarse_smape(planes(cp), planes(cr))
     if structure or grad:
         ip, ir = img(cp), img(cr)                              # tone-mapped once for both image terms
         if structure:
