@@ -285,7 +285,7 @@ def count_nonfinite(img) -> int:
     """Bins with a NaN/Inf value in any channel (what deep.replace_nonfinite replaces)."""
     from .deep import nonfinite_bins
 
-    return nonfinite_bins(img.values) if img.num_bins else 0
+    return nonfinite_bins(img.values)
 
 
 NEGATIVE_DEPTH_SHARE = 0.001   # more bins than this behind the camera: a depth convention, not a stray sample
