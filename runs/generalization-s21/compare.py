@@ -17,7 +17,7 @@ from ranad_core.evaluate import DEEP, FLAT, ratios  # noqa: E402
 def ratios_by_kind(folder):
     """kind -> (flat ratios, edit ratios, spps) of a set's eval.csv at exposure +0, by `ranad eval`'s own ratios."""
     rows = [{**r, "exposure": float(r["exposure"]), "spp": int(r["spp"]),
-             **{k: float(r[k]) for k in (*FLAT, *DEEP, "seconds")}}
+             **{k: float(r[k]) for k in (*FLAT, *DEEP, "seconds", "light") if k in r}}
             for r in csv.DictReader(open(os.path.join(folder, "eval.csv")))]
     out = {}
     for r in ratios(rows):

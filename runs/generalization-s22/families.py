@@ -16,7 +16,7 @@ from ranad_core.evaluate import DEEP, FLAT, family_ratios, summary  # noqa: E402
 def rows_of(folder):
     """eval.csv at exposure +0, numeric fields as numbers."""
     rows = [{**r, "exposure": float(r["exposure"]), "spp": int(r["spp"]),
-             **{k: float(r[k]) for k in (*FLAT, *DEEP, "seconds")}}
+             **{k: float(r[k]) for k in (*FLAT, *DEEP, "seconds", "light") if k in r}}
             for r in csv.DictReader(open(os.path.join(folder, "eval.csv")))]
     return [r for r in rows if r["exposure"] == 0]
 

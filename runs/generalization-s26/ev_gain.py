@@ -1,0 +1,46 @@
+"""`ranad eval` with ranad's output brought to the flat OIDN prior's regional light (a diagnostic, session 26):
+each pixel's radiance channels (all its bins alike) times g = box(L_oidn) / box(L_ranad), the two flat
+luminances averaged over a (2R+1)^2 box, g clamped to [1/G, G]. Still linear in the values for a given g (the
+same g would scale every AOV), but g reads OIDN. Usage: python ev_gain.py R G EVAL_ARGS..."""
+import dataclasses
+import sys
+
+import numpy as np
+
+import ranad_core.evaluate as ev
+from ranad_core import metrics
+from ranad_core.baselines import oidn_flat
+from ranad_core.model.prior import LUMA
+
+R, G = int(sys.argv[1]), float(sys.argv[2])
+real = ev.denoise_window
+
+
+def box(x: np.ndarray, r: int) -> np.ndarray:
+    """Mean over a (2r+1)^2 box, the box cut at the frame's edges (summed-area table)."""
+    h, w = x.shape
+    s = np.zeros((h + 1, w + 1))
+    s[1:, 1:] = x.cumsum(0).cumsum(1)
+    y0, y1 = np.clip(np.arange(h) - r, 0, h), np.clip(np.arange(h) + r + 1, 0, h)
+    x0, x1 = np.clip(np.arange(w) - r, 0, w), np.clip(np.arange(w) + r + 1, 0, w)
+    tot = s[y1][:, x1] - s[y0][:, x1] - s[y1][:, x0] + s[y0][:, x0]
+    return tot / ((y1 - y0)[:, None] * (x1 - x0)[None, :])
+
+
+def gained(model, images, centre, **kw):
+    res = real(model, images, centre, **kw)
+    img = res.image
+    luma = np.asarray(LUMA, np.float64)
+    lr = np.maximum(metrics.flat_rgb(img).astype(np.float64) @ luma, 0)
+    lo = np.maximum(oidn_flat(images[centre]).astype(np.float64) @ luma, 0)
+    g = np.clip(box(lo, R) / np.maximum(box(lr, R), 1e-8), 1 / G, G).reshape(-1)
+    vals = img.values.copy()
+    per_bin = g[img.pixel_index()].astype(np.float32)
+    for c in ev.radiance_channels(img.channels):
+        vals[:, img.channels.index(c)] *= per_bin
+    return dataclasses.replace(res, image=img.with_values(vals))
+
+
+ev.denoise_window = gained
+from ranad_cli.main import cli  # noqa: E402
+cli.main(["eval", *sys.argv[3:]])
