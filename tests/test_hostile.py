@@ -315,6 +315,21 @@ def test_per_pixel_sample_cap(tmp_path, monkeypatch):
     refused(lambda: read_deep(small, io="fast"), "not a positive integer")
 
 
+def test_per_part_pixel_cap(tmp_path, monkeypatch):
+    # an empty 16000 x 16000 deep frame is a 2 MB file (its zero counts compress ~1000:1) whose per-pixel tables
+    # took 6.5 GB in `ranad info` and more than a minute in flatten/denoise: the cap refuses it from the header
+    path = plain_file(tmp_path / "wide.exr", [[1, 0, 2], [0, 0, 1]])
+    assert read_deep(path, io="fast").counts.tolist() == [1, 0, 2, 0, 0, 1]
+    monkeypatch.setenv("RANAD_MAX_PIXELS", "5")
+    for io in ("fast", "oiio"):
+        e = refused(lambda: read_deep(path, io=io), "3x2 holds 6 pixels, more than the limit of 5")
+        assert "RANAD_MAX_PIXELS" in e.problem
+    monkeypatch.setenv("RANAD_MAX_PIXELS", "6")
+    assert read_deep(path, io="oiio").counts.tolist() == [1, 0, 2, 0, 0, 1]
+    monkeypatch.setenv("RANAD_MAX_PIXELS", "0")
+    refused(lambda: read_deep(path, io="fast"), "RANAD_MAX_PIXELS='0' is not a positive integer")
+
+
 def test_offset_table_pointing_into_the_header_or_overlapping(tmp_path):
     path = plain_file(tmp_path / "p.exr", [[1, 2], [0, 3], [1, 1]])
     data = bytearray(open(path, "rb").read())

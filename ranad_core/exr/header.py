@@ -43,6 +43,10 @@ STRUCTURAL = {"channels", "compression", "dataWindow", "displayWindow", "type", 
 #: Samples one pixel may hold (a hostile sample-count table claims billions); RANAD_MAX_SAMPLES_PER_PIXEL
 #: overrides it. Real renders hold tens to a few thousand.
 MAX_SAMPLES_PER_PIXEL = 65536
+#: Pixels one part's data window may hold (2^27: 16384 x 8192); RANAD_MAX_PIXELS overrides it. An empty deep
+#: frame's sample-count table compresses about 1000:1, so a 2 MB file can claim 16000 x 16000 pixels, whose
+#: per-pixel tables alone (about 12 bytes a pixel) take gigabytes; real deep renders stay under 8K (33 M pixels).
+MAX_PIXELS = 1 << 27
 #: |coordinate| of a data or display window; OpenEXR itself refuses windows beyond INT_MAX / 2.
 MAX_COORD = 1 << 30
 #: The most one packed byte can unpack to, per compression: deflate's limit is 1032:1, OpenEXR's RLE
@@ -57,18 +61,28 @@ STRUCTURAL_TYPES = {"channels": "chlist", "compression": "compression", "dataWin
 PART_TYPES = ("scanlineimage", "tiledimage", "deepscanline", "deeptile")
 
 
-def max_samples_per_pixel() -> int:
-    """The per-pixel sample cap: RANAD_MAX_SAMPLES_PER_PIXEL when set, else :data:`MAX_SAMPLES_PER_PIXEL`."""
-    text = os.environ.get("RANAD_MAX_SAMPLES_PER_PIXEL", "").strip()
+def _env_cap(name: str, default: int) -> int:
+    """The positive integer in environment variable `name` when set, else `default`."""
+    text = os.environ.get(name, "").strip()
     if not text:
-        return MAX_SAMPLES_PER_PIXEL
+        return default
     try:
         value = int(text)
     except ValueError:
         value = 0
     if value < 1:
-        raise RanadError(f"RANAD_MAX_SAMPLES_PER_PIXEL={text!r} is not a positive integer")
+        raise RanadError(f"{name}={text!r} is not a positive integer")
     return value
+
+
+def max_samples_per_pixel() -> int:
+    """The per-pixel sample cap: RANAD_MAX_SAMPLES_PER_PIXEL when set, else :data:`MAX_SAMPLES_PER_PIXEL`."""
+    return _env_cap("RANAD_MAX_SAMPLES_PER_PIXEL", MAX_SAMPLES_PER_PIXEL)
+
+
+def max_pixels() -> int:
+    """The per-part pixel cap: RANAD_MAX_PIXELS when set, else :data:`MAX_PIXELS`."""
+    return _env_cap("RANAD_MAX_PIXELS", MAX_PIXELS)
 
 
 @dataclass
@@ -435,8 +449,9 @@ def chunk_count(layout: ExrLayout, i: int, path: str) -> int | None:
 
 def check_part_size(layout: ExrLayout, i: int, file_size: int, path: str) -> PartGeometry:
     """What must hold before any reader, ranad's or OpenImageIO's, touches part ``i``'s chunks: a known
-    compression, a chunk count that matches the data window, an offset table inside the file, and no more
-    pixels than the file could describe (each pixel has a 4-byte sample count, at best 1032:1 compressed)."""
+    compression, a chunk count that matches the data window, an offset table inside the file, no more pixels
+    than the cap (:func:`max_pixels`) or than the file could describe (each pixel has a 4-byte sample count, at
+    best 1032:1 compressed)."""
     part = layout.parts[i]
     if part.compression not in COMPRESSION_NAMES:
         raise RanadError(f"unknown compression (code {part.compression})", path)
@@ -445,6 +460,9 @@ def check_part_size(layout: ExrLayout, i: int, file_size: int, path: str) -> Par
     cc = part.get("chunkCount")
     if cc is not None and expected is not None and cc != expected:
         raise RanadError(f"corrupt header (chunkCount {cc}, expected {expected})", path)
+    if geo.width * geo.height > max_pixels():
+        raise RanadError(f"data window {geo.width}x{geo.height} holds {geo.width * geo.height} pixels, more than the "
+                         f"limit of {max_pixels()} (set RANAD_MAX_PIXELS to raise it)", path)
     if geo.width * geo.height * 4 > MAX_EXPANSION_ANY * max(file_size, 1):
         raise RanadError(f"corrupt header (data window {geo.width}x{geo.height} is too large for a file of "
                          f"{file_size} bytes)", path)
