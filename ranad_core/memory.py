@@ -68,8 +68,10 @@ def prior_peak_bytes(images: list, centre: int) -> float:
     canonical and sorted copies, the prior's columns, the flattened images and OIDN's scratch (about 580 B per
     pixel at 1080p). Measured on the same frame as frame_working_bytes: 2247 MB above the resident set. Taken as
     2.5x the values + 64 B per bin + 600 B per pixel of the largest frame of the window (frames are prepared one at
-    a time), which gave 2.49 GB there."""
-    return max(2.5 * im.values.nbytes + 64.0 * im.num_bins + 600.0 * im.width * im.height for im in images)
+    a time), which gave 2.49 GB there. A frame without bins gets no OIDN run (prior.flat_images), only its
+    flattened images: 64 B per pixel (an empty 4000 x 4000 frame was refused at the default 8G for OIDN's 10 GB)."""
+    return max(2.5 * im.values.nbytes + 64.0 * im.num_bins + (600.0 if im.num_bins else 64.0) * im.width * im.height
+               for im in images)
 
 
 def fmt(n: float) -> str:

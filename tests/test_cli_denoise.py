@@ -386,3 +386,31 @@ def test_negative_depths_are_a_convention_error(tmp_path, model_file):
     assert r.exit_code == 0 and "1 bin(s) with a negative depth" in r.output, r.output
     r = run("denoise", tmp_path / "one.exr", "-o", tmp_path / "strict.exr", "--model", model_file, "--strict")
     assert r.exit_code == 2 and not (tmp_path / "strict.exr").exists()
+
+
+def test_an_empty_frame_needs_no_flat_prior(tmp_path):
+    """A frame without bins (an element's layer with nothing in view) gets no OIDN run, so its memory estimate
+    drops OIDN's 600 B per pixel: an empty 4000 x 4000 frame was refused at the default 8G for 10 GB. It
+    denoises to an empty frame of the same window, with the shipped (flat-prior) default."""
+    from ranad_core import memory
+    from ranad_core.deep import DeepImage
+
+    def frame(counts, w, h):
+        offsets = np.concatenate([[0], np.cumsum(counts)])
+        n = int(offsets[-1])
+        vals = np.column_stack([np.full((n, 4), 0.5, np.float32), np.arange(1, n + 1, dtype=np.float32)])
+        return DeepImage(values=vals, offsets=offsets, channels=["R", "G", "B", "A", "Z"],
+                         data_window=(0, 0, w - 1, h - 1),
+                         channel_types={"R": "half", "G": "half", "B": "half", "A": "half", "Z": "float"})
+
+    w, h = 96, 64
+    counts = np.zeros(w * h, np.int64)
+    empty = frame(counts, w, h)
+    assert memory.prior_peak_bytes([empty], 0) == 64.0 * w * h
+    counts[7] = 1
+    assert memory.prior_peak_bytes([frame(counts, w, h)], 0) > 600.0 * w * h
+    write_deep(tmp_path / "empty.exr", empty)
+    r = run("denoise", tmp_path / "empty.exr", "-o", tmp_path / "out.exr")
+    assert r.exit_code == 0, r.output
+    out = read_deep(tmp_path / "out.exr")
+    assert out.num_bins == 0 and out.data_window == empty.data_window and set(out.channels) >= {"R", "A", "Z"}
