@@ -196,8 +196,10 @@ def denoise_cmd(inputs, output, frames, model, device, threads, kind, maps, pres
 
             scores.append((frame.path, *reference_improvement(img, result.image, read_deep(ref_path))))
 
+    # the tiles' bar sits under the frames' and moves the cursor up to get there: in a log file (stderr not a
+    # terminal) those escape codes would end up in front of the next line, an error's included
     with tqdm(total=len(jobs), desc="frames", unit="frame", disable=len(jobs) <= 1, position=0) as fbar, \
-            tqdm(desc="tiles", unit="tile", leave=False, position=1) as tbar:
+            tqdm(desc="tiles", unit="tile", leave=False, position=1, disable=not _is_terminal(sys.stderr)) as tbar:
         warned = []
 
         def warn(msg):
@@ -222,6 +224,13 @@ def denoise_cmd(inputs, output, frames, model, device, threads, kind, maps, pres
     for path, before, after in scores:
         click.echo(f"{os.path.basename(path)}: flattened SMAPE vs reference {before:.4f} -> {after:.4f} "
                    f"({before / max(after, 1e-12):.1f}x closer)")
+
+
+def _is_terminal(stream) -> bool:
+    try:
+        return stream.isatty()
+    except (AttributeError, ValueError):   # a replaced or closed stream
+        return False
 
 
 def _make_folder(folder: str, what: str) -> None:

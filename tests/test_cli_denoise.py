@@ -414,3 +414,17 @@ def test_an_empty_frame_needs_no_flat_prior(tmp_path):
     assert r.exit_code == 0, r.output
     out = read_deep(tmp_path / "out.exr")
     assert out.num_bins == 0 and out.data_window == empty.data_window and set(out.channels) >= {"R", "A", "Z"}
+
+
+def test_no_cursor_codes_in_a_log(tmp_path, model_file):
+    """With stderr not a terminal (a farm's log; CliRunner's too) the tiles' bar, which moves the cursor up to sit
+    under the frames' bar, stays off: its escape codes used to stand in front of the one-line error."""
+    img = read_deep(FRAME)
+    vals = img.values.copy()
+    vals[:, img.channels.index("Z")] *= -1
+    write_deep(tmp_path / "neg.exr", img.with_values(vals))
+    r = run("denoise", tmp_path / "neg.exr", "-o", tmp_path / "o.exr", "--model", model_file)
+    assert r.exit_code == 2 and "\x1b[" not in r.output and not (tmp_path / "o.exr").exists()
+    assert r.output.splitlines()[-1].startswith("ranad: error: ") and "negative depth" in r.output
+    r = run("denoise", FRAME, "-o", tmp_path / "ok.exr", "--model", model_file)
+    assert r.exit_code == 0 and "\x1b[" not in r.output
