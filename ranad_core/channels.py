@@ -291,7 +291,12 @@ def mapping_options(maps=(), preset: str | None = None, motion_units: str | None
 
 
 def detect(img: DeepImage, overrides: dict | None = None, source: str | None = None) -> ChannelMap:
-    """The ChannelMap of `img`; RanadError naming `source` when a required channel is missing."""
+    """The ChannelMap of `img`; RanadError naming `source` when a required channel is missing (or stored as
+    UINT, which holds ids, not colour, alpha or depth)."""
+    as_ids = [c for c in REQUIRED if c not in img.channels and c in img.ids]
+    if as_ids:
+        raise RanadError(f"channel(s) {', '.join(as_ids)} stored as UINT; ranad reads {', '.join(REQUIRED)} as half or "
+                         f"float", source)
     return detect_names(img.channels, overrides, source)
 
 

@@ -173,6 +173,8 @@ class DeepImage:
         if "Z" not in self.channels:
             from .errors import RanadError
 
+            if "Z" in self.ids:
+                raise RanadError("channel Z stored as UINT: a deep image needs Z as half or float for its depth order")
             raise RanadError(f"no Z channel (have {', '.join(self.channels[:12])}"
                              f"{', ...' if len(self.channels) > 12 else ''}): a deep image needs Z for its depth order")
         return self.channels.index("Z"), (self.channels.index("ZBack") if "ZBack" in self.channels else None)

@@ -457,6 +457,9 @@ def test_sorted_needs_z():
     with pytest.raises(RanadError, match="no Z channel"):
         flatten(img)
     assert flatten(img, tidy=False).shape == (1, 1, 2)  # compositing in stored order needs no depth
+    img.ids["Z"] = np.ones(1, np.uint32)   # a Z of an id channel's type: said so, not "no Z"
+    with pytest.raises(RanadError, match="channel Z stored as UINT"):
+        img.sorted()
 
 
 # ---------------------------------------------------------------------------------------------------------

@@ -153,6 +153,13 @@ def test_bad_inputs_fail_with_one_line_and_write_nothing(tmp_path, model_file):
     write_deep(tmp_path / "noz.exr", img.select(["R", "G", "B", "A"]))
     r = run("denoise", tmp_path / "noz.exr", "-o", out / "x.exr", "--model", model_file)
     assert r.exit_code == 2 and "missing required channel(s) Z" in r.output and not list(out.iterdir())
+    # ... or stored as UINT (an id channel's type): said so, not "missing"
+    noa = img.select([c for c in img.channels if c != "A"])
+    noa.ids["A"] = np.ones(noa.num_bins, np.uint32)
+    noa.channel_types["A"] = "uint"
+    write_deep(tmp_path / "uinta.exr", noa)
+    r = run("denoise", tmp_path / "uinta.exr", "-o", out / "x.exr", "--model", model_file)
+    assert r.exit_code == 2 and "channel(s) A stored as UINT" in r.output and not list(out.iterdir())
     # NaN/Inf samples: refused with --strict, replaced (and reported) otherwise
     vals = img.values.copy()
     vals[5, img.channels.index("diffuse.R")] = np.nan
