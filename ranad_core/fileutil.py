@@ -14,6 +14,15 @@ from typing import Iterator
 from .errors import RanadError
 
 
+def not_a_file(path: str) -> RanadError:
+    """The error for an input path that is not a regular file: a folder, a pipe or device, or nothing at all."""
+    if os.path.isdir(path):
+        return RanadError("is a directory, expected a file", path)
+    if os.path.exists(path):
+        return RanadError("not a regular file (a pipe or device?), expected a file", path)
+    return RanadError("no such file", path)
+
+
 def check_writable_target(path: str | os.PathLike) -> str:
     """Fail early (before any work) if ``path`` cannot be created; returns it as a string."""
     path = os.fspath(path)

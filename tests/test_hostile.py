@@ -551,3 +551,18 @@ def test_deep_file_without_z_is_one_line(tmp_path):
         lines = r.output.strip().splitlines()
         assert r.exit_code == 2 and len(lines) == 1 and lines[0].startswith(f"ranad: error: {path}: "), r.output
     assert not (tmp_path / "o.exr").exists() and not (tmp_path / "d.exr").exists()
+
+
+@pytest.mark.skipif(not hasattr(os, "mkfifo"), reason="needs os.mkfifo (POSIX) to make a pipe")
+def test_a_pipe_or_device_is_named_as_such(tmp_path):
+    """A path that exists but is no regular file (a FIFO, /dev/zero) was reported as 'no such file'; reading it
+    would block or never end."""
+    fifo = tmp_path / "frame.exr"
+    os.mkfifo(fifo)
+    for args in (("info", fifo), ("flatten", fifo, "-o", tmp_path / "o.exr"),
+                 ("denoise", fifo, "-o", tmp_path / "d.exr")):
+        r = CliRunner().invoke(cli, [str(a) for a in args])
+        assert r.exit_code == 2 and "not a regular file" in r.output and "no such file" not in r.output, r.output
+    r = CliRunner().invoke(cli, ["info", str(tmp_path / "missing.exr")])
+    assert r.exit_code == 2 and "no such file" in r.output
+    assert not (tmp_path / "o.exr").exists() and not (tmp_path / "d.exr").exists()

@@ -23,7 +23,7 @@ import numpy as np
 import OpenImageIO as oiio
 
 from ..errors import RanadError
-from ..fileutil import atomic_output, check_writable_target
+from ..fileutil import atomic_output, check_writable_target, not_a_file
 
 __all__ = ["write_flat", "read_flat", "srgb_oetf", "PREVIEW_EXTENSIONS", "FLAT_EXTENSIONS"]
 
@@ -236,7 +236,7 @@ def read_flat(path: str | os.PathLike) -> tuple[np.ndarray, list[str], Window, W
     """
     path = os.fspath(path)
     if not os.path.isfile(path):
-        raise RanadError("is a directory, expected a file" if os.path.isdir(path) else "no such file", path)
+        raise not_a_file(path)
     config = oiio.ImageSpec()
     config.attribute("oiio:UnassociatedAlpha", 1)
     inp = oiio.ImageInput.open(path, config)

@@ -22,6 +22,7 @@ from dataclasses import dataclass
 from typing import Sequence, TypeVar
 
 from ..errors import RanadError
+from ..fileutil import not_a_file
 
 __all__ = [
     "Frame",
@@ -186,7 +187,7 @@ def expand_inputs(
         spec = os.fspath(spec)
         if not is_pattern(spec):
             if not os.path.isfile(spec):
-                raise RanadError("is a directory, expected a file" if os.path.isdir(spec) else "no such file", spec)
+                raise not_a_file(spec)
             add(spec, None)
             continue
         if wanted is not None:
