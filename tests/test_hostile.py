@@ -236,12 +236,17 @@ def test_huge_data_window_is_refused_before_listing_chunks(small, tmp_path):
                more={"chunkCount": struct.pack("<i", 1 << 22)})
     refused(lambda: read_deep(bad), "too large|incomplete", seconds=5, max_mib=8)
     patch_attr(small, "dataWindow", struct.pack("<4i", x0, y0, x0 + (1 << 29), y1), out=bad)
-    refused(lambda: read_deep(bad), "too large", seconds=5, max_mib=8)
+    refused(lambda: read_deep(bad), "more than the limit of", seconds=5, max_mib=8)   # the pixel cap
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setenv("RANAD_MAX_PIXELS", str(1 << 40))   # beyond the cap: the file's size still bounds the window
+        refused(lambda: read_deep(bad), "too large", seconds=5, max_mib=8)
 
 
-def test_window_larger_than_its_tables_allocates_nothing(tmp_path):
+def test_window_larger_than_its_tables_allocates_nothing(tmp_path, monkeypatch):
     """12000x12000 pixels in a 1 MB file: each chunk's packed table is just big enough to claim its 48000 bytes
-    (at zlib's 1032:1) but holds garbage; nothing of the image's size (576 MB of counts) may be allocated first."""
+    (at zlib's 1032:1) but holds garbage; nothing of the image's size (576 MB of counts) may be allocated first.
+    (The per-part pixel cap, 134 M, would refuse the window from the header: raised here to reach the chunks.)"""
+    monkeypatch.setenv("RANAD_MAX_PIXELS", str(200_000_000))
     garbage = bytes(range(47))
     path = deep_file(tmp_path / "wide.exr", 12000, 12000, [(garbage, b"", 0)] * 12000, comp=2)
     assert os.path.getsize(path) < 2 * MiB
@@ -257,7 +262,8 @@ def test_chunk_count_without_attribute_is_counted_not_listed(tmp_path):
     del layout.parts[0].attrs["chunkCount"]
     assert fast.read_part(data, layout, 0, path).num_bins == 9
     layout.parts[0].attrs["dataWindow"] = encode_box2i((0, 0, 2, (1 << 28) - 1))
-    refused(lambda: fast.read_part(data, layout, 0, path), "too large|incomplete", seconds=5, max_mib=8)
+    refused(lambda: fast.read_part(data, layout, 0, path), "too large|incomplete|more than the limit", seconds=5,
+            max_mib=8)
 
 
 # ---- chunks ------------------------------------------------------------------------------------------
