@@ -192,6 +192,21 @@ def test_structural_attributes_of_the_wrong_shape(small, tmp_path, name, raw, ty
     refused(lambda: read_deep(bad), match)
 
 
+def test_passthrough_attributes_of_the_wrong_size(small, tmp_path):
+    """A preview claiming 60000 x 60000 pixels in 24 bytes (or a v2f of 3 bytes) passed through to the output,
+    where the writer put it before 'type': OpenEXR stopped at it, and neither OpenImageIO nor ranad could open
+    what `ranad denoise` wrote. Such an attribute is refused on reading, as OpenEXR refuses it."""
+    preview = struct.pack("<II", 60000, 60000) + bytes(16)
+    for name, raw, type_name, match in (("preview", preview, "preview", "has 24 bytes, expected 14400000008"),
+                                        ("screenWindowCenter", b"abc", "v2f", "has 3 bytes, expected 8")):
+        bad = patch_attr(small, name, raw, type_name, out=tmp_path / "bad.exr")
+        refused(lambda: read_deep(bad), f"attribute '{name}' of type '{type_name}' {match}")
+        r = CliRunner().invoke(cli, ["flatten", bad, "-o", str(tmp_path / "o.exr")])
+        assert r.exit_code == 2 and "corrupt header" in r.output and not (tmp_path / "o.exr").exists()
+    good = patch_attr(small, "preview", struct.pack("<II", 2, 3) + bytes(24), "preview", out=tmp_path / "good.exr")
+    assert read_deep(good).header["preview"].raw == struct.pack("<II", 2, 3) + bytes(24)   # passes through
+
+
 @pytest.mark.parametrize("window", [(5, 0, 4, 6), (0, 6, 12, 5), (0, 0, -1, -1)])
 def test_inverted_data_window(small, tmp_path, window):
     bad = patch_attr(small, "dataWindow", struct.pack("<4i", *window), out=tmp_path / "bad.exr")

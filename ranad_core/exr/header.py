@@ -59,6 +59,12 @@ STRUCTURAL_TYPES = {"channels": "chlist", "compression": "compression", "dataWin
                     "displayWindow": "box2i", "tiles": "tiledesc", "type": "string", "name": "string",
                     "chunkCount": "int", "deepImageState": "deepImageState"}
 PART_TYPES = ("scanlineimage", "tiledimage", "deepscanline", "deeptile")
+#: byte sizes of OpenEXR's fixed-size attribute types: an attribute of one of these types with another size is
+#: refused, as OpenEXR refuses it (EXR_ERR_INVALID_ATTR); passed through, it made an output no reader opens
+FIXED_SIZES = {"box2i": 16, "box2f": 16, "v2i": 8, "v2f": 8, "v2d": 16, "v3i": 12, "v3f": 12, "v3d": 24, "int": 4,
+               "float": 4, "double": 8, "compression": 1, "lineOrder": 1, "envmap": 1, "deepImageState": 1,
+               "m33f": 36, "m33d": 72, "m44f": 64, "m44d": 128, "rational": 8, "timecode": 8, "keycode": 28,
+               "chromaticities": 32, "tiledesc": 9}
 
 
 def _env_cap(name: str, default: int) -> int:
@@ -358,6 +364,12 @@ def _check_part(layout: ExrLayout, i: int, path: str) -> None:
             raise bad(f"attribute {name!r} has type {a.type!r}, expected {expected!r}")
         if expected != "string" and isinstance(a.value(), bytes):
             raise bad(f"attribute {name!r} cannot be decoded ({len(a.raw)} bytes)")
+    for name, a in part.attrs.items():
+        size = FIXED_SIZES.get(a.type)
+        if a.type == "preview":   # width and height (uint32), then 4 bytes (RGBA) a pixel
+            size = 8 + 4 * int.from_bytes(a.raw[0:4], "little") * int.from_bytes(a.raw[4:8], "little")
+        if size is not None and len(a.raw) != size:
+            raise bad(f"attribute {name!r} of type {a.type!r} has {len(a.raw)} bytes, expected {size}")
     for name in ("dataWindow", "displayWindow"):
         if name in part.attrs:
             x0, y0, x1, y1 = part.get(name)
