@@ -35,7 +35,7 @@ def flatten_cmd(inputs, output, frames, part, exposure, as_float, assume_tidy, o
     for _, out in jobs:
         check_writable_target(out)
     from ranad_core.channels import DEPTHS
-    from ranad_core.deep import flatten
+    from ranad_core.deep import flatten, replace_nonfinite
     from ranad_core.errors import RanadError
     from ranad_core.exr import read_deep
     from ranad_core.exr.flat import write_flat
@@ -43,7 +43,10 @@ def flatten_cmd(inputs, output, frames, part, exposure, as_float, assume_tidy, o
     for f, out in progress(jobs, total=len(jobs), desc="flatten"):
         if not overwrite and os.path.exists(out):
             continue
-        image = read_deep(f.path, part=part)
+        image, nonfinite = replace_nonfinite(read_deep(f.path, part=part))   # NaN/Inf as denoise treats them
+        if nonfinite:   # a -inf depth gave NaN pixels in the tidy step's volume split
+            click.echo(f"ranad: warning: {f.path}: {nonfinite} bin(s) with NaN/Inf replaced (a depth by the "
+                       f"channel's largest finite value, anything else by 0)", err=True)
         try:
             pixels = flatten(image, tidy=not assume_tidy)
         except RanadError as e:  # a problem of this file's contents (no Z): name the file

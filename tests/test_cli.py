@@ -145,6 +145,26 @@ def test_flatten_exr_and_png(tmp_path):
     assert r.exit_code == 0 and (tmp_path / "flat.png").stat().st_size > 0
 
 
+def test_flatten_replaces_nonfinite_values_as_denoise_does(tmp_path):
+    """A Z of -inf made NaN pixels (the tidy step's volume split divides by it) with exit 0 and no word; now the
+    one NaN/Inf policy (deep.replace_nonfinite) applies, with a warning: the output is finite and equals the
+    flattened image with the values replaced."""
+    from ranad_core.deep import flatten, replace_nonfinite
+
+    img = random_deep(width=8, height=6, channels=("R", "G", "B", "A", "Z", "ZBack"), ids=())
+    vals = img.values.copy()
+    vals[::2, img.channels.index("Z")] = -np.inf
+    vals[3, img.channels.index("R")] = np.nan
+    bad = img.with_values(vals)
+    write_deep(tmp_path / "bad.exr", bad)
+    r = run("flatten", str(tmp_path / "bad.exr"), "-o", str(tmp_path / "flat.exr"), "--float")
+    assert r.exit_code == 0 and "bin(s) with NaN/Inf replaced" in r.output, r.output
+    pixels, channels, _, _ = read_flat(tmp_path / "flat.exr")
+    assert np.isfinite(pixels).all()
+    expected = flatten(replace_nonfinite(bad)[0])
+    np.testing.assert_allclose(pixels, expected[..., [bad.channels.index(c) for c in channels]], rtol=1e-6)
+
+
 def test_flatten_sequence_to_pattern(tmp_path):
     img = random_deep(width=8, height=6)
     for f in (1, 2, 3):
