@@ -25,7 +25,7 @@ from .denoise import (ALIGN, CPU_TILE_BINS, choose_tile, denoise_window, halo_fo
                       tile_bytes)
 from .errors import RanadError
 from .profile import stage
-from .exr import read_deep, read_header, resolve_part, write_parts
+from .exr import check_copyable_parts, read_deep, read_header, resolve_part, write_parts
 
 
 @dataclass
@@ -364,6 +364,7 @@ def denoise_shot(jobs, loaded, opts: ShotOptions, frame_bar=None, tile_bar=None,
         members, centre = window_of(frame, sequence, window)
         layout = read_header(frame.path)
         chosen = select_parts(layout, frame.path, opts.parts, opts.overrides)
+        check_copyable_parts(frame.path, layout, chosen)   # the parts copied as they are: fail now, not at the write
         if store is None:
             store = FrameStore((window + 1) * len(chosen))
         replaced, reported = {}, False
@@ -372,7 +373,12 @@ def denoise_shot(jobs, loaded, opts: ShotOptions, frame_bar=None, tile_bar=None,
             part = None if not layout.multipart else key
             where = frame.path if not layout.multipart else f"{frame.path} ({part_label(layout, index)})"
             with stage("read"):
-                images = [store.get(f, part) for f in members]
+                try:
+                    images = [store.get(f, part) for f in members]
+                except RanadError as e:   # name the part whose chunks are bad (the file has others)
+                    if not layout.multipart or e.problem.startswith("part "):
+                        raise
+                    raise RanadError(f"{part_label(layout, index)}: {e.problem}", e.path) from None
             img = images[centre]
             disp = first_display.setdefault(key, (frame.path, img.display_window))
             for f, other in zip(members, images):

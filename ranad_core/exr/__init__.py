@@ -144,6 +144,19 @@ def _state_code(image: DeepImage, state: str | None) -> int | None:
     return None if state is None else deep_state_code(state)
 
 
+def check_copyable_parts(source: str | os.PathLike, layout: ExrLayout, replaced) -> None:
+    """Refuse (RanadError) a multi-part ``source`` whose parts other than those in ``replaced`` could not be
+    copied by :func:`write_parts`: checked before the work, so a corrupt part a run does not denoise fails it at
+    once rather than after the denoising. Reads the offset tables and chunk headers only."""
+    if not layout.multipart:
+        return
+    source = os.fspath(source)
+    with FileSource(source) as src:
+        for i in range(len(layout.parts)):
+            if i not in replaced:
+                fast.chunk_extents(src, layout, i, source)
+
+
 def write_parts(path: str | os.PathLike, source: str | os.PathLike, replaced: dict[int, DeepImage],
                 io: IoMode | None = None) -> None:
     """Write a copy of the EXR file ``source`` to ``path`` (atomically) in which each deep part ``i`` of

@@ -446,6 +446,30 @@ def write_file(f, parts: list[EncodedPart], multipart: bool, deep: bool = True) 
             f.write(p.chunks[k])
 
 
+def chunk_extents(src, layout: ExrLayout, index: int, path: str) -> tuple[list, list]:
+    """(start, size) of each of part ``index``'s chunks (its header included), from the offset table and each
+    chunk's own header (deep: the packed table and data sizes; flat: the data size), checked against the file:
+    what copying the part needs, read without its chunks' bodies."""
+    src = as_source(src, path)
+    table_pos, count, _ = offset_table_span(layout, index, path)
+    if count is None:
+        raise RanadError(f"cannot copy part {index} (its chunk count is unknown)", path)
+    starts = offsets_array(src, table_pos, count, path).tolist()
+    deep, tiled = layout.part_is_deep(index), layout.part_is_tiled(index)
+    fmt = ("<i" if layout.multipart else "<") + ("4i" if tiled else "i") + ("QQQ" if deep else "i")
+    size = struct.calcsize(fmt)
+    sizes = []
+    for k, start in enumerate(starts):
+        if start <= 0 or start + size > src.size:
+            raise RanadError(f"truncated file (part {index}, chunk {k} is missing)", path)
+        fields = struct.unpack(fmt, src.read(start, size, f"part {index}, chunk {k}'s header"))
+        body = fields[-3] + fields[-2] if deep else fields[-1]
+        if body < 0 or start + size + body > src.size:
+            raise RanadError(f"truncated file (part {index}, chunk {k} is cut short)", path)
+        sizes.append(size + body)
+    return starts, sizes
+
+
 def raw_part(src, layout: ExrLayout, index: int, path: str, part_number: int | None = -1) -> EncodedPart:
     """Part ``index`` of a file exactly as stored (attributes and every chunk's bytes, in the order the file
     stores them), to be written into another file unchanged. Each chunk's extent comes from its own header
@@ -454,22 +478,9 @@ def raw_part(src, layout: ExrLayout, index: int, path: str, part_number: int | N
     chunk's first field says in multi-part files."""
     src = as_source(src, path)
     part = layout.parts[index]
-    table_pos, count, _ = offset_table_span(layout, index, path)
-    if count is None:
-        raise RanadError(f"cannot copy part {index} (its chunk count is unknown)", path)
-    starts = offsets_array(src, table_pos, count, path)
-    deep, tiled = layout.part_is_deep(index), layout.part_is_tiled(index)
-    fmt = ("<i" if layout.multipart else "<") + ("4i" if tiled else "i") + ("QQQ" if deep else "i")
-    size = struct.calcsize(fmt)
-    chunks = []
-    for k, start in enumerate(starts.tolist()):
-        if start <= 0 or start + size > src.size:
-            raise RanadError(f"truncated file (part {index}, chunk {k} is missing)", path)
-        fields = struct.unpack(fmt, src.read(start, size, f"part {index}, chunk {k}'s header"))
-        body = fields[-3] + fields[-2] if deep else fields[-1]
-        if body < 0 or start + size + body > src.size:
-            raise RanadError(f"truncated file (part {index}, chunk {k} is cut short)", path)
-        chunks.append(src.read(start, size + body, f"part {index}, chunk {k}"))
+    starts, sizes = chunk_extents(src, layout, index, path)
+    count = len(starts)
+    chunks = [src.read(start, size, f"part {index}, chunk {k}") for k, (start, size) in enumerate(zip(starts, sizes))]
     if part_number != -1 and part_number != (index if layout.multipart else None):
         skip = 4 if layout.multipart else 0
         prefix = b"" if part_number is None else struct.pack("<i", part_number)
