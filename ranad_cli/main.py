@@ -1,7 +1,8 @@
 """The ``ranad`` click group: global options and the one place where errors become exit codes.
 
 A RanadError (bad input, unwritable output) is printed as one line ``ranad: error: <file>: <problem>`` and
-exits with 2; any other exception is an internal error (exit 1). Tracebacks appear only with ``--debug``.
+exits with 2, as does running out of memory; any other exception is an internal error (exit 1). Tracebacks
+appear only with ``--debug``.
 The handling lives in the group's ``invoke`` so click's CliRunner sees exactly what a shell user sees.
 """
 
@@ -50,6 +51,12 @@ class RanadGroup(click.Group):
         except KeyboardInterrupt:
             click.echo("ranad: interrupted", err=True)
             ctx.exit(130)
+        except MemoryError as e:   # a frame larger than the memory the process may have (ulimit, a farm's cap)
+            if ctx.obj and ctx.obj.get("debug"):
+                traceback.print_exc()
+            click.echo(f"ranad: error: out of memory ({e or 'no detail'}): the input needs more memory than this "
+                       f"process could get", err=True)
+            ctx.exit(EXIT_USER_ERROR)
         except Exception as e:  # noqa: BLE001 - the CLI boundary turns every failure into an exit code
             if ctx.obj and ctx.obj.get("debug"):
                 traceback.print_exc()

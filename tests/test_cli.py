@@ -324,6 +324,20 @@ def test_internal_error_exit_1(monkeypatch, tmp_path):
     assert r.exit_code == 1 and "internal error" in r.output and "Traceback" not in r.output
 
 
+def test_out_of_memory_is_one_line_exit_2(monkeypatch):
+    """A frame larger than the process may hold (a ulimit, a farm's cap) said 'internal error' (exit 1); it is a
+    one-line error, exit 2, like other input the machine cannot take."""
+    import ranad_cli.cmd_info as cmd_info
+
+    def too_big(*a, **k):
+        raise MemoryError("Unable to allocate 128. MiB for an array")
+
+    monkeypatch.setattr(cmd_info, "describe", too_big)
+    r = CliRunner().invoke(cli, ["info", OBJECTID])
+    assert r.exit_code == 2 and r.output.startswith("ranad: error: out of memory (Unable to allocate 128. MiB")
+    assert r.output.count("\n") == 1 and "Traceback" not in r.output
+
+
 def test_io_switch_forces_openimageio(tmp_path, monkeypatch):
     from ranad_core.exr import fast
 
