@@ -17,9 +17,11 @@ to rerun on other values:
   of the centre's bin layout and depths: SHA-256 of offsets and Z), `mapping` (JSON of the channel map),
   `overrides` (JSON of the --map overrides, so `ranad aov` maps the channels the same way), `tile`, `halo`,
   `part` (the part of a multi-part file, by name or index; empty for single-part files), `merge_gap` (the
-  binmerge gap, "0" when nothing merged), `dark_radius` (darkness' radius; absent in older caches: 0).
+  binmerge gap, "0" when nothing merged), `dark_radius` (darkness' radius; absent in older caches: 0),
+  `tensors_crc32` (CRC-32 of every tensor's name, type, shape and bytes; absent in older caches).
 
-A cache is refused when its format, model id or layout fingerprint does not match what it is used with.
+A cache is refused when its format, model id or layout fingerprint does not match what it is used with, or when
+its tensors do not match their checksum (a disk or copy error: safetensors itself checks only the sizes).
 """
 
 from __future__ import annotations
@@ -27,6 +29,7 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+import zlib
 
 import numpy as np
 
@@ -46,6 +49,16 @@ def layout_fingerprint(img: DeepImage) -> str:
     if DEPTH in img.channels:
         h.update(np.ascontiguousarray(img.channel(DEPTH), np.float32).tobytes())
     return h.hexdigest()[:16]
+
+
+def tensors_checksum(tensors: dict) -> str:
+    """CRC-32 (8 hex digits) of the tensors' names, types, shapes and bytes, in name order."""
+    crc = 0
+    for name in sorted(tensors):
+        t = np.ascontiguousarray(tensors[name])
+        crc = zlib.crc32(f"{name}:{t.dtype.str}:{t.shape}".encode(), crc)
+        crc = zlib.crc32(memoryview(t).cast("B"), crc)
+    return f"{crc:08x}"
 
 
 def cache_path(folder: str, output: str, part: str | None = None) -> str:
@@ -81,7 +94,7 @@ def write_cache(path: str, img: DeepImage, result, model_id: str, model_spec: st
             "mapping": json.dumps(result.mapping.describe()), "overrides": json.dumps(overrides or {}),
             "tile": str(tile), "halo": str(halo), "part": part or "",
             "merge_gap": repr(float(result.merge_gap)) if result.merges else "0",
-            "dark_radius": str(int(result.dark_radius))}
+            "dark_radius": str(int(result.dark_radius)), "tensors_crc32": tensors_checksum(tensors)}
     with atomic_output(path) as tmp:
         save_file(tensors, tmp, metadata=meta)
 
@@ -98,6 +111,8 @@ def read_cache(path: str) -> tuple[dict, dict]:
         raise RanadError(f"not a ranad cache ({type(e).__name__})", path) from None
     if meta.get("format") != FORMAT:
         raise RanadError(f"cache format {meta.get('format')!r} is not {FORMAT!r}; rerun ranad denoise --cache", path)
+    if "tensors_crc32" in meta and tensors_checksum(tensors) != meta["tensors_crc32"]:
+        raise RanadError("corrupt cache (its tensors do not match their checksum); rerun ranad denoise --cache", path)
     return tensors, meta
 
 

@@ -196,3 +196,10 @@ def test_aov_command_through_the_cache_and_refusals(tmp_path):
     (tmp_path / "junk.ranadcache").write_bytes(b"junk" * 10)
     r = run("aov", tmp_path / "junk.ranadcache", "--layers", "lg_*", "-o", tmp_path / "a5.exr")
     assert r.exit_code == 2 and "not a ranad cache" in r.output
+    # one bit flipped in the tensors' bytes (a disk or copy error; safetensors checks only the sizes)
+    data = bytearray((tmp_path / "only0.ranadcache").read_bytes())
+    data[-3] ^= 0x10
+    (tmp_path / "flipped.ranadcache").write_bytes(bytes(data))
+    r = run("aov", tmp_path / "flipped.ranadcache", "--layers", "lg_*", "--input", src / "b.0000.exr",
+            "-o", tmp_path / "a6.exr")
+    assert r.exit_code == 2 and "corrupt cache" in r.output and not (tmp_path / "a6.exr").exists()
