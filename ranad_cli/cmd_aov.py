@@ -35,7 +35,7 @@ def aov_cmd(cache, pattern, output, aov_input, device):
     from ranad_core import cache as cache_io
     from ranad_core.aov import denoise_cached_frame
     from ranad_core.device import resolve
-    from ranad_core.exr import write_deep
+    from ranad_core.exr import read_header, resolve_part, write_deep, write_parts
     from ranad_core.exr.sequence import Frame, format_frame, is_pattern, output_path
     from ranad_core.fileutil import check_writable_target
     from ranad_core.model.store import load_model
@@ -65,24 +65,39 @@ def aov_cmd(cache, pattern, output, aov_input, device):
             return format_frame(aov_input, frame)
         return aov_input
 
-    jobs = []
-    for (path, tensors, meta), frame in zip(entries, frames):
-        src = source_of(meta, frame, meta["input"])
+    # one output per AOV file: the caches of a multi-part file's parts (one each) go into the same output, written
+    # once with every part; two different AOV files meeting in one output is an error, not an overwrite
+    outputs = {}   # output -> (AOV file, output, [(cache, tensors, meta, frame)])
+    sources = [source_of(meta, frame, meta["input"]) for (_, _, meta), frame in zip(entries, frames)]
+    for (path, tensors, meta), frame, src in zip(entries, frames, sources):
         if not os.path.isfile(src):
             raise RanadError("AOV file not found", src)
-        out = output_path(output, Frame(src, frame), len(entries))
+        out = output_path(output, Frame(src, frame), len(set(sources)))
+        key = os.path.normcase(os.path.abspath(out))
+        if key in outputs and os.path.abspath(outputs[key][0]) != os.path.abspath(src):
+            raise RanadError(f"{outputs[key][0]} and {src} would both be written to this output; give each its own "
+                             f"pattern or folder", out)
         check_writable_target(out)
-        jobs.append((path, tensors, meta, frame, src, out))
+        outputs.setdefault(key, (src, out, []))[2].append((path, tensors, meta, frame))
     models = {}
-    with tqdm(total=len(jobs), desc="aov", unit="frame", disable=len(jobs) <= 1) as bar:
-        for path, tensors, meta, frame, src, out in jobs:
-            spec = meta["model"] or None
-            if spec not in models:
-                models[spec] = load_model(spec)
-                models[spec].model.to(run_on)
-            loaded = models[spec]
-            aov_files = [source_of(meta, None if frame is None else frame - int(meta["centre"]) + k, p)
-                         for k, p in enumerate(json.loads(meta["window"]))]
-            write_deep(out, denoise_cached_frame(loaded, path, tensors, meta, pattern, aov_files))
-            bar.update(1)
-    click.echo(f"denoised {len(jobs)} frame(s) of AOVs matching {pattern!r}")
+    with tqdm(total=len(entries), desc="aov", unit="frame", disable=len(entries) <= 1) as bar:
+        for src, out, parts in outputs.values():
+            replaced, layout = {}, read_header(src)
+            for path, tensors, meta, frame in parts:
+                spec = meta["model"] or None
+                if spec not in models:
+                    models[spec] = load_model(spec)
+                    models[spec].model.to(run_on)
+                aov_files = [source_of(meta, None if frame is None else frame - int(meta["centre"]) + k, p)
+                             for k, p in enumerate(json.loads(meta["window"]))]
+                image = denoise_cached_frame(models[spec], path, tensors, meta, pattern, aov_files)
+                index = resolve_part(layout, meta.get("part") or None, src) if layout.multipart else 0
+                if index in replaced:
+                    raise RanadError(f"two caches hold part {index} of this file", path)
+                replaced[index] = image
+                bar.update(1)
+            if not layout.multipart:
+                write_deep(out, replaced[0])
+            else:   # every denoised part, the file's other parts copied as they are
+                write_parts(out, src, replaced)
+    click.echo(f"denoised {len(entries)} frame(s) of AOVs matching {pattern!r}")

@@ -216,3 +216,45 @@ def test_a_corrupt_part_that_is_denoised_is_named(tmp_path, tiny):
     r = run("denoise", src, "-o", tmp_path / "out.exr", "--model", tiny)
     assert r.exit_code == 2 and "part 2 'right': truncated file" in r.output, r.output
     assert not (tmp_path / "out.exr").exists()
+
+
+def test_aov_of_a_multi_part_file_keeps_every_part(tmp_path, tiny):
+    """`ranad aov` on the caches of a stereo file's two eyes (one cache a part) writes one multi-part output with
+    both eyes' light groups denoised, each equal to that part's reconstruction alone; it wrote each part as a
+    single-part file to the same path, the last eye replacing the first. An eye without the layers fails the
+    run with no output."""
+    from ranad_core import cache as cache_io
+    from ranad_core.aov import denoise_cached_frame
+    from ranad_core.model.store import load_model
+
+    img = read_deep(SHOT / "noisy_spp16.0001.exr")
+    left, right = img.crop((0, 0, 23, 19)), img.crop((6, 4, 33, 21))
+    left.header["name"], right.header["name"] = encode_string("left"), encode_string("right")
+    src = tmp_path / "stereo.exr"
+    with open(src, "wb") as f:
+        fast.write_file(f, [fast.encode_part(left, fast.PartLayout("zips"), None, 0),
+                            fast.encode_part(right, fast.PartLayout("zips"), None, 1)], multipart=True)
+    r = run("denoise", src, "-o", tmp_path / "beauty.exr", "--model", tiny, "--cache", tmp_path / "cache")
+    assert r.exit_code == 0, r.output
+    r = run("aov", tmp_path / "cache", "--layers", "lg_*", "-o", str(tmp_path / "aov") + "/")
+    assert r.exit_code == 0, r.output
+    out = tmp_path / "aov" / "stereo.exr"
+    assert [p.name for p in read_layout(out)[0].parts] == ["left", "right"]
+    loaded = load_model(tiny)
+    for name, noisy in (("left", left), ("right", right)):
+        cache = tmp_path / "cache" / f"beauty.{name}.ranadcache"
+        tensors, meta = cache_io.read_cache(str(cache))
+        want = denoise_cached_frame(loaded, str(cache), tensors, meta, "lg_*", [str(src)])
+        got = read_deep(out, part=name)
+        for c in ("lg_key.R", "lg_fill.G"):
+            np.testing.assert_array_equal(got.channel(c), want.channel(c).astype(np.float16).astype(np.float32))
+        assert not np.array_equal(got.channel("lg_key.R"), noisy.channel("lg_key.R"))
+    bare = right.select(["R", "G", "B", "A", "Z"])
+    bare.header["name"] = encode_string("right")
+    with open(src, "wb") as f:
+        fast.write_file(f, [fast.encode_part(left, fast.PartLayout("zips"), None, 0),
+                            fast.encode_part(bare, fast.PartLayout("zips"), None, 1)], multipart=True)
+    r = run("denoise", src, "-o", tmp_path / "b2.exr", "--model", tiny, "--cache", tmp_path / "cache2")
+    assert r.exit_code == 0, r.output
+    r = run("aov", tmp_path / "cache2", "--layers", "lg_*", "-o", str(tmp_path / "aov2") + "/")
+    assert r.exit_code == 2 and "no AOV layers match" in r.output and not list((tmp_path / "aov2").iterdir())
