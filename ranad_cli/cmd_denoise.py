@@ -133,7 +133,7 @@ def denoise_cmd(inputs, output, frames, model, device, threads, kind, maps, pres
 
     from ranad_core.channels import mapping_options
     from ranad_core.exr import read_deep
-    from ranad_core.exr.sequence import expand_inputs, format_frame, is_pattern, output_path, shard as take_shard
+    from ranad_core.exr.sequence import expand_inputs, format_frame, is_pattern, output_paths, shard as take_shard
     from ranad_core.fileutil import check_writable_target
     from ranad_core.model.store import load_model, training_window
     from ranad_core.shot import ShotOptions, denoise_shot, first_frame, prescan
@@ -154,7 +154,8 @@ def denoise_cmd(inputs, output, frames, model, device, threads, kind, maps, pres
         _make_folder(os.path.dirname(os.path.abspath(output)), output)
     else:
         _make_folder(output, output)
-    jobs = [(f, output_path(output, f, len(frames_list))) for f in frames_list]
+    outs = dict(zip(sequence, output_paths(output, sequence)))   # the whole shot's: no shard may collide either
+    jobs = [(f, outs[f]) for f in frames_list]
     for _, out in jobs:
         check_writable_target(out)
     if cache_dir:

@@ -6,7 +6,7 @@ import os
 
 import click
 
-from ranad_core.exr.sequence import expand_inputs, output_path
+from ranad_core.exr.sequence import expand_inputs, output_paths
 from ranad_core.fileutil import check_writable_target
 
 from .progress import progress
@@ -31,7 +31,7 @@ def flatten_cmd(inputs, output, frames, part, exposure, as_float, assume_tidy, o
     INPUTS are files or patterns (name.####.exr, name.%04d.exr, name.@@@@.exr).
     """
     frames_list = expand_inputs(list(inputs), frames)
-    jobs = [(f, output_path(output, f, len(frames_list))) for f in frames_list]
+    jobs = list(zip(frames_list, output_paths(output, frames_list)))
     for _, out in jobs:
         check_writable_target(out)
     from ranad_core.channels import DEPTHS

@@ -217,11 +217,11 @@ def with_denoised_aovs(model, images, centre, mapping, result, pattern: str, sou
 
 
 def window_of(frame, sequence: list, window: int) -> tuple[list, int]:
-    """(the frames of `frame`'s window in `sequence`, the index of `frame` in it): consecutive frame numbers
-    only, at most (window-1)/2 on each side."""
+    """(the frames of `frame`'s window in `sequence`, the index of `frame` in it): consecutive frame numbers of
+    the frame's own shot (Frame.sequence) only, at most (window-1)/2 on each side."""
     if window <= 1 or frame.frame is None:
         return [frame], 0
-    by_number = {f.frame: f for f in sequence if f.frame is not None}
+    by_number = {f.frame: f for f in sequence if f.frame is not None and f.sequence == frame.sequence}
     half = (window - 1) // 2
     before = []
     for k in range(1, half + 1):

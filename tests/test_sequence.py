@@ -13,6 +13,7 @@ from ranad_core.exr.sequence import (
     format_frame,
     is_pattern,
     output_path,
+    output_paths,
     parse_frame_range,
     shard,
 )
@@ -254,6 +255,39 @@ def test_output_path_plain_file(tmp_path):
         output_path(out, Frame("in.0001.exr", 1), 2)
     assert e.value.problem == "several inputs need an output pattern (name.####.exr) or a folder"
     assert e.value.path == out
+
+
+def test_two_inputs_into_one_output_are_refused(tmp_path):
+    """Two folders' x.exr into one folder, or two shots' frame 1 into one pattern: the second overwrote the first
+    and the run said it had written both."""
+    out = tmp_path / "out"
+    out.mkdir()
+    a, b = Frame(str(tmp_path / "A" / "x.exr")), Frame(str(tmp_path / "B" / "x.exr"))
+    with pytest.raises(RanadError) as e:
+        output_paths(str(out) + os.sep, [a, b])
+    assert e.value.path == str(out / "x.exr") and "A" in e.value.problem and "would both be written" in e.value.problem
+    s1, s3 = Frame(str(tmp_path / "S1" / "s.0001.exr"), 1), Frame(str(tmp_path / "S3" / "s.0001.exr"), 1)
+    with pytest.raises(RanadError):
+        output_paths(str(tmp_path / "d.####.exr"), [s1, s3])
+    assert output_paths(str(out), [a, Frame(str(tmp_path / "A" / "y.exr"))]) == [str(out / "x.exr"),
+                                                                                  str(out / "y.exr")]
+
+
+def test_frames_remember_their_pattern(tmp_path):
+    """Two shots given together: each frame knows the pattern that found it, so a cross-frame window takes
+    neighbours from its own shot (shot.window_of); equality ignores it."""
+    from ranad_core.shot import window_of
+
+    for d in ("S1", "S3"):
+        (tmp_path / d).mkdir()
+        touch(tmp_path / d, "s.0001.exr", "s.0002.exr", "s.0003.exr")
+    p1, p3 = str(tmp_path / "S1" / "s.####.exr"), str(tmp_path / "S3" / "s.####.exr")
+    seq = expand_inputs([p1, p3])
+    assert [f.sequence for f in seq] == [p1] * 3 + [p3] * 3
+    assert seq[0] == Frame(str(tmp_path / "S1" / "s.0001.exr"), 1)
+    for k, d in ((1, "S1"), (4, "S3")):
+        window, centre = window_of(seq[k], seq, 3)
+        assert [f.path for f in window] == [str(tmp_path / d / f"s.000{n}.exr") for n in (1, 2, 3)] and centre == 1
 
 
 # --- shards -------------------------------------------------------------------------------------

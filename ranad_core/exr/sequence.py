@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import os
 import re
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Sequence, TypeVar
 
 from ..errors import RanadError
@@ -42,10 +42,13 @@ T = TypeVar("T")
 
 @dataclass(frozen=True)
 class Frame:
-    """One input file; ``frame`` is its frame number, or None for a plain file name (no pattern)."""
+    """One input file; ``frame`` is its frame number, or None for a plain file name (no pattern). ``sequence``:
+    the pattern it was found by (None for a plain name), so that a cross-frame window takes its neighbours from
+    the frame's own shot when several shots are given (not part of equality)."""
 
     path: str
     frame: int | None = None
+    sequence: str | None = field(default=None, compare=False)
 
 
 def _find_token(pattern: str) -> re.Match[str] | None:
@@ -177,11 +180,11 @@ def expand_inputs(
     out: list[Frame] = []
     seen: set[str] = set()
 
-    def add(path: str, frame: int | None) -> None:
+    def add(path: str, frame: int | None, pattern: str | None = None) -> None:
         key = os.path.abspath(path)
         if key not in seen:
             seen.add(key)
-            out.append(Frame(path, frame))
+            out.append(Frame(path, frame, pattern))
 
     for spec in specs:
         spec = os.fspath(spec)
@@ -195,7 +198,7 @@ def expand_inputs(
                 path = format_frame(spec, n)
                 if not os.path.isfile(path):
                     raise RanadError(f"frame {n} is missing", path)
-                add(path, n)
+                add(path, n, spec)
             continue
         found = _scan(spec)
         if not found:
@@ -210,7 +213,7 @@ def expand_inputs(
                         format_frame(spec, n),
                     )
         for n in found:
-            add(format_frame(spec, n), n)
+            add(format_frame(spec, n), n, spec)
     return out
 
 
@@ -246,6 +249,22 @@ def output_path(
     if os.path.exists(frame.path) and os.path.exists(path) and os.path.samefile(path, frame.path):
         raise RanadError("output would overwrite the input; choose another name", path)
     return path
+
+
+def output_paths(out_spec: str | os.PathLike, frames: Sequence[Frame], ext: str | None = None) -> list[str]:
+    """:func:`output_path` of every input, refusing two inputs that would be written to the same file (two
+    shots' frame 1 into one pattern, two folders' x.exr into one folder): the second would silently replace the
+    first."""
+    paths, first = [], {}
+    for f in frames:
+        path = output_path(out_spec, f, len(frames), ext)
+        key = os.path.normcase(os.path.abspath(path))
+        if key in first:
+            raise RanadError(f"{first[key]} and {f.path} would both be written to this output; give each its own "
+                             f"pattern or folder", path)
+        first[key] = f.path
+        paths.append(path)
+    return paths
 
 
 def shard(items: Sequence[T], spec: str) -> list[T]:
