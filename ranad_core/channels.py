@@ -166,6 +166,13 @@ class ChannelMap:
         d["mode"] = self.mode()
         return d
 
+    def value_channels(self) -> list:
+        """Every file channel the map reads a value from, motion aside (a frame without motion is warned about,
+        not refused): what each frame of a window must carry."""
+        names = [*self.beauty, self.alpha, self.depth, self.depth_back, self.coverage]
+        names += [c for chans in self.layers.values() for part in layer_parts(chans) for c in part]
+        return [c for c in dict.fromkeys(names) if c]
+
     def depth_channels(self) -> tuple:
         """The file channels holding depth (what the NaN/Inf policy fills with the frame's largest depth)."""
         return tuple(c for c in (self.depth, self.depth_back) if c)

@@ -223,6 +223,30 @@ def test_denoise_with_a_window_caches_every_frame(tmp_path):
     assert len(json.loads(meta["window"])) == 1
 
 
+def test_a_neighbour_without_the_centres_channels_is_named(tmp_path):
+    """The centre frame's channel map reads every frame of its window: a neighbour without the diffuse/specular
+    split was a KeyError (internal error, exit 1); now a one-line error naming that frame, nothing written."""
+    from safetensors.torch import save_file
+
+    from ranad_core.exr import read_deep, write_deep
+
+    _, cross = small_models()
+    model = tmp_path / "xf.safetensors"
+    save_file({k: v.contiguous() for k, v in cross.state_dict().items()}, str(model),
+              metadata={"model_config": json.dumps(cross.config.to_dict())})
+    shot = tmp_path / "shot"
+    shot.mkdir()
+    for n in range(3):
+        img = read_deep(SHOT / f"noisy_spp16.{n:04d}.exr")
+        if n == 1:
+            img = img.select([c for c in img.channels if not c.startswith(("diffuse.", "specular."))])
+        write_deep(shot / f"s.{n:04d}.exr", img)
+    r = CliRunner().invoke(cli, ["denoise", str(shot / "s.####.exr"), "-o", str(tmp_path / "out" / "d.####.exr"),
+                                 "--model", str(model)])
+    assert r.exit_code == 2 and "s.0001.exr: lacks channel(s) diffuse.R" in r.output, r.output
+    assert "that s.0000.exr has" in r.output and not list((tmp_path / "out").glob("*.exr"))
+
+
 def test_default_window_is_the_training_window(tmp_path):
     """Without --window a cross-frame model runs with the window its train_config records (offsets it never
     saw in training stay unused); files without that record get 3."""
