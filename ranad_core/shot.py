@@ -23,6 +23,7 @@ from . import heap
 from .channels import REQUIRED, detect, motion_candidates
 from .denoise import (ALIGN, CPU_TILE_BINS, choose_tile, denoise_window, halo_for, is_cross_frame, model_features,
                       tile_bytes)
+from .deep import all_finite, nonfinite_bins
 from .errors import RanadError
 from .profile import stage
 from .exr import check_copyable_parts, read_deep, read_header, resolve_part, write_parts
@@ -381,7 +382,13 @@ def denoise_shot(jobs, loaded, opts: ShotOptions, frame_bar=None, tile_bar=None,
                     raise RanadError(f"{part_label(layout, index)}: {e.problem}", e.path) from None
             img = images[centre]
             disp = first_display.setdefault(key, (frame.path, img.display_window))
+            needed = detect(img, opts.overrides, where).value_channels()
             for f, other in zip(members, images):
+                missing = [c for c in needed if c not in other.channels]
+                if missing:   # the centre's channel map is every frame's: a neighbour lacking a channel of it
+                    raise RanadError(f"lacks channel(s) {', '.join(missing[:6])}{', ...' if len(missing) > 6 else ''}"
+                                     f" that {os.path.basename(frame.path)} has (the frames of a window are read "
+                                     f"with one channel map)", f.path)
                 if other.display_window != disp[1]:
                     raise RanadError(f"display window {other.display_window} differs from {disp[1]} of {disp[0]} "
                                      "(frames of a sequence must share a display window)", f.path)
@@ -461,6 +468,10 @@ def _denoise_part(model, images, centre, flows, where, opts, summary, halo, tile
     if opts.aovs:
         with stage("aovs"):
             result.image = with_denoised_aovs(model, images, centre, mapping, result, opts.aovs, where, flows)
+    if not all_finite(result.image.values):   # the inputs were made finite: NaN/Inf here is the model's own
+        n = nonfinite_bins(result.image.values)
+        raise RanadError(f"the model's output has NaN/Inf in {n} bin(s) (broken or overflowing weights?); "
+                         "nothing written", where)
     nonfinite = max(result.nonfinite, bad)
     if nonfinite:
         if opts.strict:

@@ -147,3 +147,21 @@ def test_nan_only_outside_the_model_channels_is_still_counted(tmp_path, tiny):
     assert np.isfinite(read_deep(tmp_path / "o.exr").values).all()
     r = run("denoise", tmp_path / "p.exr", "-o", tmp_path / "s.exr", "--model", tiny, "--strict")
     assert r.exit_code == 2 and "7 bin(s) with NaN/Inf" in r.output
+
+
+def test_a_model_that_outputs_nan_writes_nothing(tmp_path, tiny):
+    """Weights that overflow (or are NaN) gave NaN frames with exit 0 and no word: the inputs are made finite
+    first, so a non-finite output is the model's, refused with one line and no output."""
+    from safetensors.torch import load_file, save_file
+    from safetensors import safe_open
+
+    with safe_open(tiny, "pt") as f:
+        meta = f.metadata()
+    state = {k: v * float("nan") if v.is_floating_point() else v for k, v in load_file(tiny).items()}
+    bad = tmp_path / "nan.safetensors"
+    save_file(state, str(bad), metadata=meta)
+    r = run("denoise", SHOT / "noisy_spp16.0001.exr", "-o", tmp_path / "d.exr", "--model", bad)
+    assert r.exit_code == 2 and "the model's output has NaN/Inf" in r.output, r.output
+    assert r.output.strip().splitlines()[-1].startswith("ranad: error: ") and not (tmp_path / "d.exr").exists()
+    r = run("denoise", SHOT / "noisy_spp16.0001.exr", "-o", tmp_path / "ok.exr", "--model", tiny)
+    assert r.exit_code == 0 and (tmp_path / "ok.exr").exists()
