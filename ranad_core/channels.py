@@ -359,9 +359,25 @@ def detect_names(channels, overrides: dict | None = None, source: str | None = N
             motion[key] = found
         else:
             m.layers[key] = found
+    _check_distinct(m, source)
     m.motion = MotionSpec(prev=motion["motion_prev"], next=motion["motion_next"], units=conv.get("units") or "pixels",
                           fps=conv.get("fps"), shutter=conv.get("shutter") or 1.0, y_up=conv.get("y") == "up")
     return m
+
+
+def _check_distinct(m: ChannelMap, source) -> None:
+    """Refuse a map that reads one channel for two radiance layers (--map diffuse=specular, diffuse=a+a, a layer
+    on R,G,B): the denoised layers are written back into their channels, so two results would land in one place,
+    the other layer's own channels would stay noisy and the beauty would be rebuilt from parts that never summed
+    to it. (The guides, albedo and normals, are only read.)"""
+    owner = {c: "beauty" for c in m.beauty}
+    for layer in ("diffuse", "specular", "emission"):
+        for part in layer_parts(m.layers.get(layer)):
+            for c in part:
+                if c in owner:
+                    what = f"{layer} reads {c} twice" if owner[c] == layer else f"{owner[c]} and {layer} both read {c}"
+                    raise RanadError(f"channel map: {what} (each layer needs channels of its own; see --map)", source)
+                owner[c] = layer
 
 
 def _show(val) -> str:

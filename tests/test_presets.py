@@ -139,6 +139,14 @@ def test_map_sums_layers_and_writes_the_parts_back(original, tmp_path):
             mapping_options(bad)
     with pytest.raises(RanadError, match="no such channels"):
         detect(img, mapping_options(["diffuse=kd_a+nothing"]))
+    # one channel read for two radiance layers: two results would be written into it (and the beauty rebuilt from
+    # parts that never summed to it); the guides are only read
+    for bad, what in ((["specular=ks_a", "diffuse=ks_a"], "diffuse and specular both read ks_a.R"),
+                      (["diffuse=kd_a+kd_a"], "diffuse reads kd_a.R twice"),
+                      (["diffuse=R,G,B"], "beauty and diffuse both read R")):
+        with pytest.raises(RanadError, match=what):
+            detect(img, mapping_options(bad))
+    assert detect(img, mapping_options(["diffuse=kd_a+kd_b", "albedo=kd_a"])).layers["albedo"][0] == "kd_a.R"
     with pytest.raises(RanadError, match="unknown renderer"):
         mapping_options(preset="blender")
     # through the CLI: the denoised sum goes back into the parts in their noisy proportions
