@@ -10,7 +10,7 @@ import sys
 import click
 from tqdm import tqdm
 
-from .params import device_option
+from .params import FiniteFloat, device_option
 from ranad_core.binmerge import MERGE_GAP
 from ranad_core.darkness import DARK_RADIUS
 from ranad_core.errors import RanadError
@@ -21,7 +21,7 @@ UNITS = {"": 1, "K": 1 << 10, "M": 1 << 20, "G": 1 << 30, "T": 1 << 40}
 
 def parse_bytes(text: str) -> float:
     """'8G' -> 8 * 2**30; K, M, G, T with an optional 'B'/'iB'; a bare number is bytes."""
-    m = re.fullmatch(r"\s*([\d.]+)\s*([KMGT]?)(?:i?B)?\s*", text or "", re.I)
+    m = re.fullmatch(r"\s*(\d+(?:\.\d*)?|\.\d+)\s*([KMGT]?)(?:i?B)?\s*", text or "", re.I)
     if not m:
         raise click.BadParameter(f"expected a size like 8G or 512M, got {text!r}", param_hint="--max-memory")
     return float(m.group(1)) * UNITS[m.group(2).upper()]
@@ -38,7 +38,7 @@ def parse_bytes(text: str) -> float:
                                             "single-frame one otherwise).")
 @device_option("the model and the flat prior's OIDN run",
                " Reading, input preparation and writing stay on the CPU.")
-@click.option("--threads", type=click.IntRange(1), default=None, help="CPU threads (default: all cores).")
+@click.option("--threads", type=click.IntRange(1, 1024), default=None, help="CPU threads (default: all cores).")
 @click.option("--kind", type=click.Choice(["auto", "deepz", "deepoid"]), default="auto", show_default=True,
               help="What every frame must be: deepz, or deepoid (an id channel gives every bin of a pixel its own "
                    "id); a frame of the other kind is an error naming it. The model handles both kinds alike; "
@@ -65,7 +65,7 @@ def parse_bytes(text: str) -> float:
                    "per-bin depth error is 0.66-0.89x the noisy input's on its held-out and in-family sets; "
                    "models without the layer gate (cpu-small-pdl-v1 and older) were up to 3x worse than the "
                    "noisy input on layered scenes (model cards).")
-@click.option("--bin-merge", "bin_merge", type=click.FloatRange(0, 0.5), default=MERGE_GAP, show_default=True,
+@click.option("--bin-merge", "bin_merge", type=FiniteFloat(0, 0.5), default=MERGE_GAP, show_default=True,
               help="Thin bins of one surface (consecutive point bins of a pixel within this relative depth gap, "
                    "same object ids) are denoised as one bin and shared back, as the model's training bins hold "
                    "whole surfaces: renderers that merge less than 3% get the quality of ones that do. Output "
@@ -93,8 +93,8 @@ def parse_bytes(text: str) -> float:
               help="Fail on NaN/Inf input samples instead of replacing them, and on any negative depth (a frame "
                    "with more than 0.1% of its bins at negative depth is refused anyway: another z convention).")
 @click.option("--window", type=click.IntRange(1, 7), default=None,
-              help="Frames per window for cross-frame models (default: the window the model was trained with; 1 "
-                   "denoises every frame alone).")
+              help="Frames per window for cross-frame models, odd: the centre and as many on each side (default: "
+                   "the window the model was trained with; 1 denoises every frame alone).")
 @click.option("--aovs", default=None, metavar="PATTERN",
               help="Also denoise the AOV layers matching PATTERN (e.g. 'lg_*') in the same files, reusing the "
                    "beauty's kernels (see `ranad aov`).")
@@ -141,6 +141,8 @@ def denoise_cmd(inputs, output, frames, model, device, threads, kind, maps, pres
     from ranad_core.device import resolve
 
     budget = parse_bytes(max_memory)
+    if window is not None and window % 2 == 0:   # a window is the centre and as many frames on each side
+        raise click.BadParameter(f"{window} is even; give an odd window (1, 3, 5, 7)", param_hint="--window")
     run_on = resolve(device)
     if threads:
         torch.set_num_threads(threads)

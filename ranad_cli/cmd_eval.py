@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import os
 
 import click
@@ -9,7 +10,7 @@ from tqdm import tqdm
 
 from ranad_core.errors import RanadError
 
-from .params import int_list
+from .params import FiniteFloat, int_list
 
 
 @click.command("eval")
@@ -37,7 +38,7 @@ from .params import int_list
 @click.option("--exposure", "exposures", default="0", show_default=True,
               help="Exposure sweep: stops by which every input is scaled (comma-separated, e.g. -6,0,6); outputs "
                    "are scaled back before scoring, so rows at different exposures compare directly.")
-@click.option("--bin-merge", "bin_merge", type=click.FloatRange(0, 0.5), default=None,
+@click.option("--bin-merge", "bin_merge", type=FiniteFloat(0, 0.5), default=None,
               help="ranad's thin-bin merging gap, as `ranad denoise --bin-merge` (default: its default; 0: off).")
 @click.option("--dark-radius", "dark_radius", type=click.IntRange(0, 8), default=None,
               help="ranad's black neighbourhoods, as `ranad denoise --dark-radius` (default: its default; 0: off).")
@@ -61,6 +62,8 @@ def eval_cmd(dataset, out, model, spp, kinds, scenes, grid_pairs, temporal, cros
         stops = tuple(float(x) for x in exposures.split(",") if x.strip())
     except ValueError:
         raise click.BadParameter(f"not a list of numbers: {exposures!r}", param_hint="--exposure") from None
+    if not stops or not all(math.isfinite(x) and abs(x) <= 64 for x in stops):
+        raise click.BadParameter(f"expected stops within -64..64, got {exposures!r}", param_hint="--exposure")
     held = tuple(x.strip() for x in held_out.split(",") if x.strip())
     total = ev.count_pairs(dataset, spps, kinds, scenes) * len(stops)
     if total == 0:

@@ -9,6 +9,7 @@ import click
 from ranad_core.exr.sequence import expand_inputs, output_paths
 from ranad_core.fileutil import check_writable_target
 
+from .params import FiniteFloat
 from .progress import progress
 
 
@@ -19,7 +20,8 @@ from .progress import progress
                    "format: .exr (flat, all channels), .png or .jpg (8-bit sRGB preview).")
 @click.option("--frames", help="Frame range for patterns, e.g. 1001-1010 or 1001-1100x2 (default: all on disk).")
 @click.option("--part", help="Part index or name in multi-part files (default: the first deep part).")
-@click.option("--exposure", type=float, default=0.0, show_default=True, help="Exposure in stops (PNG/JPG only).")
+@click.option("--exposure", type=FiniteFloat(-64, 64), default=0.0, show_default=True,
+              help="Exposure in stops (PNG/JPG only).")
 @click.option("--float", "as_float", is_flag=True, help="Write 32-bit float EXR channels (default: half, Z float).")
 @click.option("--assume-tidy", is_flag=True,
               help="Skip sorting/splitting the bins (faster; wrong on overlapping volume samples).")

@@ -11,7 +11,7 @@ from ranad_core.errors import RanadError
 from ranad_core.synth.pixel_filter import FILTERS
 from ranad_core.synth.scene import FAMILIES
 
-from .params import int_list as _int_list
+from .params import FiniteFloat, int_list as _int_list
 from .params import width_range
 
 
@@ -39,10 +39,10 @@ from .params import width_range
               help="Scenes rendered in parallel (processes; the cores are shared out between them).")
 @click.option("--ref-frames", type=click.Choice(["centre", "all"]), default="centre", show_default=True,
               help="Frames that get a reference: the centre frame (training) or all (temporal evaluation).")
-@click.option("--motion", default=1.0, show_default=True, type=click.FloatRange(0),
+@click.option("--motion", default=1.0, show_default=True, type=FiniteFloat(0),
               help="Scale of every per-frame movement (camera, objects, spins): 0.5 renders the same shots at twice "
                    "the frame rate, 0 holds them still.")
-@click.option("--bin-gap", default=0.03, show_default=True, type=click.FloatRange(0, 1),
+@click.option("--bin-gap", default=0.03, show_default=True, type=FiniteFloat(0, 1),
               help="Deep-Z binning: a pixel's samples start a new bin where consecutive depths differ by more than "
                    "this share (plus 1 cm at the default). Small values split surfaces into many thin bins, as "
                    "renderers that merge less do (held-out data for `ranad denoise --bin-merge`).")

@@ -7,7 +7,7 @@ from tqdm import tqdm
 
 from ranad_core.train.weights import WEIGHTS
 
-from .params import device_option
+from .params import FiniteFloat, device_option
 
 
 def _weighted(text: str, key, option: str, expected: str) -> tuple:
@@ -42,18 +42,19 @@ def _spp_weight(text: str) -> tuple[int, float]:
 @click.option("--config", default="cpu-small", show_default=True, help="Model configuration name.")
 @click.option("--steps", default=2000, show_default=True, type=click.IntRange(1), help="Total optimiser steps.")
 @click.option("--crop", default=48, show_default=True, type=click.IntRange(8), help="Training crop size (pixels).")
-@click.option("--lr", default=1e-3, show_default=True, type=float, help="Peak learning rate (AdamW).")
+@click.option("--lr", default=1e-3, show_default=True, type=FiniteFloat(0, 1),
+              help="Peak learning rate (AdamW).")
 @click.option("--seed", default=0, show_default=True, type=int, help="Seed of the crops and the initialisation.")
 @click.option("--checkpoint-every", default=200, show_default=True, type=click.IntRange(1))
 @click.option("--processes", default=1, show_default=True, type=click.IntRange(1),
               help="Data-parallel processes on this machine (DDP over gloo; one crop per process per step). For "
                    "several machines, start `torchrun ... -m ranad_cli train ...` instead.")
-@click.option("--p-no-aux", default=0.2, show_default=True, type=click.FloatRange(0, 1),
+@click.option("--p-no-aux", default=0.2, show_default=True, type=FiniteFloat(0, 1),
               help="Share of crops shown without albedo/normal, so the model serves files that lack them.")
-@click.option("--p-no-split", default=0.2, show_default=True, type=click.FloatRange(0, 1),
+@click.option("--p-no-split", default=0.2, show_default=True, type=FiniteFloat(0, 1),
               help="Share of crops shown without the diffuse/specular split (beauty only).")
 @click.option("--rotate-normals", "p_rotate_normals", default=0.0, show_default=True,
-              type=click.FloatRange(0, 1),
+              type=FiniteFloat(0, 1),
               help="Share of crops whose normals are turned by a random rotation: renderers write normals in world "
                    "space (for a camera facing any way) or in camera space, and ranad's scenes all face one way; "
                    "the model should not depend on the space. 0 keeps earlier recipes' random draws.")
@@ -64,7 +65,7 @@ def _spp_weight(text: str) -> tuple[int, float]:
                    "single-frame model of the same size (also of another feature set, e.g. cpu-small-v1 for "
                    "cpu-small-p); for a cross-frame config, a single-frame model's, or for a config with the "
                    "output mix (cpu-small-xfm) a cross-frame model's without it.")
-@click.option("--temporal-weight", default=0.0, show_default=True, type=click.FloatRange(0),
+@click.option("--temporal-weight", default=0.0, show_default=True, type=FiniteFloat(0),
               help="Cross-frame configs: weight of a temporal loss on two consecutive frames per step (each denoised "
                    "with its own window): the change of the flattened result from one frame to the next against the "
                    "reference's. Needs references on every frame (`ranad synth --ref-frames all`).")
@@ -74,7 +75,7 @@ def _spp_weight(text: str) -> tuple[int, float]:
 @click.option("--freeze-spatial", is_flag=True,
               help="Cross-frame configs with --init: train only the temporal parts (T-Mix or the input keys, the "
                    "temporal kernel step and its gate); the single-frame model's weights stay as they are.")
-@click.option("--p-misalign", default=0.0, show_default=True, type=click.FloatRange(0, 1),
+@click.option("--p-misalign", default=0.0, show_default=True, type=FiniteFloat(0, 1),
               help="Cross-frame configs: share of training windows whose neighbour frames are shifted by 2 to "
                    "crop/4 pixels, as if their motion vectors were wrong, so the model learns to use a neighbour "
                    "only where it agrees with the centre frame (refraction, bad vectors, disocclusions).")

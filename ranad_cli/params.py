@@ -2,7 +2,20 @@
 
 from __future__ import annotations
 
+import math
+
 import click
+
+
+class FiniteFloat(click.FloatRange):
+    """click.FloatRange that refuses NaN and infinities (FloatRange lets NaN through its bounds: every comparison
+    with it is false)."""
+
+    def convert(self, value, param, ctx):
+        rv = super().convert(value, param, ctx)
+        if not math.isfinite(rv):
+            self.fail(f"{value!r} is not a finite number", param, ctx)
+        return rv
 
 
 def int_list(text: str) -> tuple:

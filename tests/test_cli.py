@@ -396,3 +396,17 @@ def test_help_texts():
     assert r.exit_code == 0 and r.output.strip() == f"ranad, version {__version__}"
     r = run("no-such-command")
     assert r.exit_code == 2 and "No such command" in r.output
+
+
+@pytest.mark.parametrize("args", [
+    ("denoise", "--max-memory", "."), ("denoise", "--max-memory", "1.2.3"), ("denoise", "--threads", "99999"),
+    ("denoise", "--bin-merge", "nan"), ("denoise", "--window", "2"), ("flatten", "--exposure", "nan"),
+    ("flatten", "--exposure", "1e308")], ids=lambda a: " ".join(a))
+def test_bad_option_values_are_usage_errors(tmp_path, args):
+    """Values that crashed (internal error: float('.'), a thread per 99999, 2^1e308) or were taken silently (NaN
+    through click's FloatRange, an even window that ran as the odd one below it): usage errors, exit 2."""
+    cmd, *opt = args
+    out = tmp_path / ("o.png" if cmd == "flatten" else "o.exr")
+    r = run(cmd, str(OBJECTID), "-o", str(out), *opt)
+    assert r.exit_code == 2 and "Invalid value" in r.output and "internal error" not in r.output, r.output
+    assert not out.exists()
