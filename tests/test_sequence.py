@@ -102,6 +102,15 @@ def test_parse_frame_range_errors_name_the_string(bad):
     assert repr(bad) in str(e.value)
 
 
+def test_parse_frame_range_refuses_a_billion_frames():
+    """3-999999999 built a list of a billion frame numbers (tens of GB) before any file was looked at."""
+    with pytest.raises(RanadError, match="names more than 1000000 frames"):
+        parse_frame_range("3-999999999")
+    with pytest.raises(RanadError, match="more than"):
+        parse_frame_range("1-600000,700000-1300000")
+    assert len(parse_frame_range("1-1000000")) == 1000000
+
+
 # --- expand_inputs ------------------------------------------------------------------------------
 
 

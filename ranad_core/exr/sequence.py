@@ -97,6 +97,11 @@ def format_frame(pattern: str | os.PathLike, frame: int) -> str:
 _RANGE_PART = re.compile(r"\s*(-?\d+)\s*(?:-\s*(-?\d+)\s*(?:x\s*(\d+)\s*)?)?")
 
 
+#: frames one range may name: a shot is thousands; 3-999999999 built a list of a billion before finding frame 3
+#: missing
+MAX_FRAMES = 1_000_000
+
+
 def parse_frame_range(s: str) -> list[int]:
     """Frames named by a range string: ``1001-1010``, ``1001-1100x2`` (every 2nd), ``1001``, or
     comma-separated combinations such as ``1001-1005,1010``. Negative frames are allowed (``-5-5``).
@@ -124,6 +129,8 @@ def parse_frame_range(s: str) -> list[int]:
             raise RanadError(f"frame range {s!r}: step must be at least 1", None)
         if end < start:
             raise RanadError(f"frame range {s!r}: {part.strip()!r} ends before it starts", None)
+        if len(frames) + len(range(start, end + 1, step)) > MAX_FRAMES:   # before a list of a billion frames
+            raise RanadError(f"frame range {s!r} names more than {MAX_FRAMES} frames", None)
         for f in range(start, end + 1, step):
             if f not in seen:
                 seen.add(f)
