@@ -65,9 +65,18 @@ def eval_cmd(dataset, out, model, spp, kinds, scenes, grid_pairs, temporal, cros
     if not stops or not all(math.isfinite(x) and abs(x) <= 64 for x in stops):
         raise click.BadParameter(f"expected stops within -64..64, got {exposures!r}", param_hint="--exposure")
     held = tuple(x.strip() for x in held_out.split(",") if x.strip())
+    from ranad_core.train.data import find_pairs
+
+    missing = []
+    find_pairs(dataset, missing)
+    missing = [p for p in missing if (not spps or p.spp in spps) and (not kinds or p.kind in kinds)]
     total = ev.count_pairs(dataset, spps, kinds, scenes) * len(stops)
     if total == 0:
-        raise RanadError("no pairs match the --spp/--kind selection", dataset)
+        raise RanadError("no pairs match the --spp/--kind selection" + (f" ({len(missing)} noisy file(s) have no "
+                         f"reference, e.g. {missing[0].reference})" if missing else ""), dataset)
+    if missing:   # a scene still rendering, or a reference lost: the scores leave them out, and say so
+        click.echo(f"ranad: warning: {len(missing)} noisy file(s) without their reference are not scored, e.g. "
+                   f"{missing[0].reference}", err=True)
     try:
         os.makedirs(out, exist_ok=True)
     except OSError as e:

@@ -21,7 +21,7 @@ from . import metrics
 from .baselines import oidn_flat, recolour
 from .denoise import denoise_window
 from .exr import read_deep
-from .train.data import find_pairs
+from .train.data import find_pairs, read_manifest
 
 METHODS = ("noisy", "oidn", "recolour", "ranad")
 FLAT = ("smape", "dssim", "flip")
@@ -300,12 +300,11 @@ TEMPORAL_METHODS = ("noisy", "oidn", "ranad", "ranad-xf")
 
 def temporal_scenes(dataset: str) -> list:
     """(scene folder, manifest) of scenes with references on at least two consecutive frames."""
-    import json
     from pathlib import Path
 
     out = []
     for manifest in sorted(Path(dataset).glob("scene_*/manifest.json")):
-        m = json.loads(manifest.read_text())
+        m = read_manifest(manifest)
         refs = m.get("reference_frames", [m["centre_frame"]])
         if any(f + 1 in refs for f in refs):
             out.append((manifest.parent, m))

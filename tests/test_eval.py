@@ -6,6 +6,7 @@ from __future__ import annotations
 import csv
 import importlib.util
 import math
+import shutil
 
 import numpy as np
 import pytest
@@ -194,6 +195,26 @@ def test_eval_command_writes_table_csv_and_grid(tmp_path):
     assert (out / "grid.png").stat().st_size > 1000 and (out / "eval.md").is_file()
     r = CliRunner().invoke(cli, ["eval", str(ds), "-o", str(out), "--model", str(run), "--spp", "7"])
     assert r.exit_code == 2 and "no pairs match" in r.output
+
+
+def test_eval_names_what_it_cannot_score(tmp_path):
+    """A noisy file without its reference was dropped without a word (or 'no pairs match' with nothing else);
+    a manifest.json that is no JSON was an internal error in eval and train."""
+    ds = dataset_from_example(tmp_path / "ds")
+    shutil.copytree(ds / "scene_0000", ds / "scene_0001")
+    ref = next((ds / "scene_0000" / "deepoid").glob("reference_spp16.*.exr"))
+    ref.unlink()
+    run = untrained_run(tmp_path)
+    r = CliRunner().invoke(cli, ["eval", str(ds), "-o", str(tmp_path / "ev"), "--model", str(run), "--grid", "0"])
+    assert r.exit_code == 0 and f"1 noisy file(s) without their reference are not scored, e.g. {ref}" in r.output
+    shutil.rmtree(ds / "scene_0001")
+    r = CliRunner().invoke(cli, ["eval", str(ds), "-o", str(tmp_path / "ev"), "--model", str(run)])
+    assert r.exit_code == 2 and "no complete scenes" in r.output and f"have no reference, e.g. {ref}" in r.output
+    (ds / "scene_0000" / "manifest.json").write_text("{not json")
+    for args in (["eval", str(ds), "-o", str(tmp_path / "ev2"), "--model", str(run)],
+                 ["train", str(ds), "-o", str(tmp_path / "tr"), "--steps", "1"]):
+        r = CliRunner().invoke(cli, args)
+        assert r.exit_code == 2 and "manifest.json: not a scene manifest" in r.output, r.output
 
 
 def test_shipped_default_model_denoises_the_example():

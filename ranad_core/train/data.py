@@ -46,23 +46,42 @@ def manifests(roots) -> list:
     return [m for root in dataset_roots(roots) for m in sorted(root.glob("scene_*/manifest.json"))]
 
 
-def find_pairs(roots) -> list:
-    """Every (noisy, reference) pair of the centre frames of the complete scenes of one or several datasets."""
+def read_manifest(path: Path) -> dict:
+    """A scene's manifest.json; RanadError naming it when it is no JSON object with the keys the pairs need."""
+    try:
+        m = json.loads(Path(path).read_text())
+    except (OSError, UnicodeDecodeError, ValueError) as e:
+        raise RanadError(f"not a scene manifest ({type(e).__name__})", path) from None
+    if not isinstance(m, dict) or not isinstance(m.get("spp"), list) or not isinstance(m.get("centre_frame"), int):
+        raise RanadError("not a scene manifest (needs a list 'spp' and an integer 'centre_frame')", path)
+    return m
+
+
+def find_pairs(roots, missing: list | None = None) -> list:
+    """Every (noisy, reference) pair of the centre frames of the complete scenes of one or several datasets.
+    `missing`: where given, the pairs whose noisy file is there without its reference are appended to it (a scene
+    still rendering, a reference lost), so a caller can say what it leaves out."""
     for root in dataset_roots(roots):
         if not root.is_dir():
             raise RanadError("dataset folder not found", root)
     pairs = []
     for root in dataset_roots(roots):
-        found = []
+        found, lacking = [], []
         for manifest in manifests(root):
-            m = json.loads(manifest.read_text())
+            m = read_manifest(manifest)
             for kind in ("deepz", "deepoid"):
                 for spp in m["spp"]:
                     pair = pair_at(manifest.parent, kind, spp, m["centre_frame"])
                     if complete(pair):
                         found.append(pair)
+                    elif pair.noisy.is_file():
+                        lacking.append(pair)
         if not found:
-            raise RanadError("no complete scenes (scene_*/manifest.json with noisy and reference files)", root)
+            raise RanadError("no complete scenes (scene_*/manifest.json with noisy and reference files)"
+                             + (f"; {len(lacking)} noisy file(s) have no reference, e.g. {lacking[0].reference}"
+                                if lacking else ""), root)
+        if missing is not None:
+            missing += lacking
         pairs += found
     return pairs
 
@@ -72,7 +91,7 @@ def find_frame_pairs(roots) -> list:
     the temporal loss. Empty for datasets with the centre frame's reference only."""
     out = []
     for manifest in manifests(roots):
-        m = json.loads(manifest.read_text())
+        m = read_manifest(manifest)
         refs = set(m.get("reference_frames", [m["centre_frame"]]))
         for kind in ("deepz", "deepoid"):
             for spp in m["spp"]:
