@@ -257,7 +257,7 @@ class DeepImage:
         roles = associated_alpha(self.channels)
         cov_col = _coverage_column(self.channels)
         parts = []
-        for b0, b1, offs in _chunks(self.offsets):
+        for b0, b1, offs in pixel_chunks(self.offsets):
             parts.append(_tidy_chunk(self.values[b0:b1], offs, {k: v[b0:b1] for k, v in self.ids.items()},
                                      roles, cov_col, zi, zbi))
         counts = np.concatenate([c for _, c, _ in parts])
@@ -576,7 +576,7 @@ _CHUNK_BINS = 1 << 16
 _CHUNK_PIXELS = 1 << 17
 
 
-def _chunks(offsets: np.ndarray):
+def pixel_chunks(offsets: np.ndarray):
     """Yield (first bin, end bin, offsets relative to the first bin) for runs of whole pixels holding about
     ``_CHUNK_BINS`` bins (a pixel with more bins gets a chunk of its own), at most ``_CHUNK_PIXELS`` pixels."""
     bins, pixels = _CHUNK_BINS, _CHUNK_PIXELS
@@ -810,7 +810,7 @@ def flatten(image: DeepImage, tidy: bool = True) -> np.ndarray:
     if tidy and depth is None:
         image.depth_columns()  # raises: tidying needs Z
     p0 = 0
-    for b0, b1, offs in _chunks(image.offsets):
+    for b0, b1, offs in pixel_chunks(image.offsets):
         vals = image.values[b0:b1]
         if tidy:
             vals, counts, _ = _tidy_chunk(vals, offs, {}, roles, cov_col, *depth)

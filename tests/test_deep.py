@@ -788,7 +788,7 @@ def test_chunked_work_matches_one_chunk(monkeypatch):
         t1, f1, g1 = img.tidy(), flatten(img), flatten(img, tidy=False)
         monkeypatch.setattr(deep, "_CHUNK_BINS", 5)
         monkeypatch.setattr(deep, "_CHUNK_PIXELS", 3)
-        assert len(list(deep._chunks(img.offsets))) > 20
+        assert len(list(deep.pixel_chunks(img.offsets))) > 20
         t2, f2, g2 = img.tidy(), flatten(img), flatten(img, tidy=False)
         monkeypatch.undo()
         assert np.array_equal(t1.offsets, t2.offsets) and np.array_equal(t1.values, t2.values)

@@ -47,14 +47,26 @@ def thin_bins(image: DeepImage, mapping) -> int:
     one surface, as renderers that merge a pixel's samples less than ranad's training data write. Found as
     denoise finds them: on the canonical channels of `mapping`, after the NaN/Inf policy."""
     from ..binmerge import groups_of
-    from ..channels import DEPTHS, canonical
-    from ..deep import replace_nonfinite
+    from ..channels import ALPHA, DEPTH, DEPTH_BACK, DEPTHS
+    from ..deep import pixel_chunks, replace_nonfinite
 
     if image.num_bins < 2:
         return 0
-    srt, perm = replace_nonfinite(canonical(image, mapping)[0], DEPTHS)[0].sorted()
-    groups = groups_of(srt, image, perm)
-    return 0 if groups is None else image.num_bins - groups.merged
+    # the merge reads alpha, depths and ids only, which the canonical image copies as they are; it is found a chunk
+    # of whole pixels at a time (its float64 work arrays over a whole 16.7 M-bin frame took 2 GB)
+    direct = [(ALPHA, mapping.alpha), (DEPTH, mapping.depth)] + ([(DEPTH_BACK, mapping.depth_back)]
+                                                                 if mapping.depth_back else [])
+    small = DeepImage(values=image.columns([src for _, src in direct]), offsets=image.offsets,
+                      channels=[name for name, _ in direct], data_window=image.data_window)
+    small = replace_nonfinite(small, DEPTHS)[0]   # over the whole frame: its largest depth fills non-finite ones
+    thin = 0
+    for b0, b1, offs in pixel_chunks(small.offsets):
+        part = DeepImage(values=small.values[b0:b1], offsets=offs, channels=small.channels,
+                         ids={k: v[b0:b1] for k, v in image.ids.items()}, data_window=(0, 0, offs.size - 2, 0))
+        srt, perm = part.sorted()
+        groups = groups_of(srt, part, perm)
+        thin += 0 if groups is None else part.num_bins - groups.merged
+    return thin
 
 
 def dark_pixels(image: DeepImage, mapping) -> int:
