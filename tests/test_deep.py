@@ -808,3 +808,23 @@ def test_measured_state(z, zb, expected):
     values = np.array([[0.5, a, b] for a, b in zip(z, zb)] + [[0.5, 0.0, 0.0]], dtype=np.float32)
     img = DeepImage(values=values, offsets=[0, 3, 4], channels=["A", "Z", "ZBack"], data_window=(0, 0, 1, 0))
     assert img.measured_state() == expected
+
+
+def test_tidying_refuses_a_quadratic_split_before_making_it(monkeypatch):
+    """n volume samples that all overlap split into up to n (2n - 1) pieces: 10000 in one pixel (a 129 KB file)
+    took 10 GB and 50 s to flatten. A tidied pixel may hold as many samples as a read one (the per-pixel cap),
+    checked before anything is cut; below it the split is as before."""
+    from ranad_core.errors import RanadError
+
+    def volumes(n):
+        z = np.linspace(1.0, 2.0, n, dtype=np.float32)
+        vals = np.column_stack([np.full((n, 3), 0.01), np.full(n, 0.01), z, z + 5.0]).astype(np.float32)
+        return DeepImage(vals, [0, n], ["R", "G", "B", "A", "Z", "ZBack"])
+
+    monkeypatch.setenv("RANAD_MAX_SAMPLES_PER_PIXEL", "1000")   # the piece cap: 64000
+    with pytest.raises(RanadError, match=r"300 overlapping volume samples are cut into 90000 pieces when "
+                                         r"tidied, more than the limit of 64000"):
+        flatten(volumes(300))
+    assert volumes(150).tidy().num_bins == 299      # 150 * 299 pieces, merged back to one per interval
+    monkeypatch.setenv("RANAD_MAX_SAMPLES_PER_PIXEL", "2000")
+    assert volumes(300).tidy().num_bins == 599 and np.isfinite(flatten(volumes(300))).all()
