@@ -318,3 +318,33 @@ def test_copy_of_real_file_with_unicode_name(tmp_path):
     p = tmp_path / "plan_é.exr"
     shutil.copy(bundled("openexr_test_11.deep.exr"), p)
     assert read_deep(p).num_bins == 6056
+
+
+@pytest.mark.parametrize("tile", [(7, 3), (100, 200)])
+def test_uncompressed_deep_tiles_at_the_edges_written_by_openexr(tmp_path, tile):
+    """OpenEXR writes an uncompressed deep tile's sample-count table at the full tile's size, also where the tile
+    is cut by the window's edge (its rows x cols counts first): ranad refused such files as corrupt ("uncompressed
+    block has 84 bytes, expected 12"). Read, they equal OpenImageIO's reading of the same file."""
+    h, w = 37, 29
+    rng = np.random.default_rng(0)
+    counts = rng.integers(0, 4, (h, w))
+
+    def chan(dtype, make):
+        a = np.empty((h, w), dtype=object)
+        for y in range(h):
+            for x in range(w):
+                a[y, x] = make(counts[y, x]).astype(dtype)
+        return a
+
+    z = chan("f", lambda n: np.sort(rng.uniform(1, 10, n)))
+    r, a = chan("e", lambda n: rng.uniform(0, 1, n)), chan("e", lambda n: rng.uniform(0, 1, n))
+    desc = OpenEXR.TileDescription()
+    desc.xSize, desc.ySize, desc.mode = tile[0], tile[1], OpenEXR.LevelMode.ONE_LEVEL
+    path = str(tmp_path / "tiles.exr")
+    OpenEXR.File({"type": OpenEXR.deeptile, "compression": OpenEXR.NO_COMPRESSION, "tiles": desc,
+                  "dataWindow": ((3, -5), (3 + w - 1, -5 + h - 1)), "displayWindow": ((0, -10), (40, 40))},
+                 {"R": r, "G": r, "B": r, "A": a, "Z": z}).write(path)
+    fast_img, oiio_img = read_deep(path, io="fast"), read_deep(path, io="oiio")
+    assert fast_img.counts.reshape(h, w).tolist() == counts.tolist()
+    np.testing.assert_array_equal(fast_img.offsets, oiio_img.offsets)
+    np.testing.assert_array_equal(fast_img.values, oiio_img.values)

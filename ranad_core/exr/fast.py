@@ -188,8 +188,13 @@ def read_part(buf, layout: ExrLayout, index: int, path: str,
         r0, r1, c0, c1 = geo.chunk(k)
         rows, cols = r1 - r0, c1 - c0
         table_pos, packed_table, _, unpacked_data = (int(v) for v in heads[k])
+        want = rows * cols * 4
+        if comp == codec.NONE and geo.tiled and packed_table == geo.chunk_w * geo.chunk_h * 4 > want:
+            # OpenEXR stores an uncompressed edge tile's table at the full tile's size, its rows x cols counts
+            # first (what OpenEXR and OpenImageIO read back); the rest is not part of the image
+            packed_table = want
         try:
-            table = unpack(comp, src.read(table_pos, packed_table, f"{where(k)}'s sample counts"), rows * cols * 4)
+            table = unpack(comp, src.read(table_pos, packed_table, f"{where(k)}'s sample counts"), want)
         except codec.CodecError as e:
             raise RanadError(f"corrupt chunk ({where(k)}: sample counts: {e})", path) from None
         cum = np.frombuffer(table, dtype="<i4").reshape(rows, cols).astype(np.int64)
