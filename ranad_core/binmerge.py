@@ -63,7 +63,10 @@ class Groups:
 def groups_of(srt: DeepImage, img: DeepImage, perm: np.ndarray, gap: float | None = None) -> "Groups | None":
     """find_groups of `srt`, the sorted canonical image of `img` (`perm`: the sort), with `img`'s object ids kept
     apart; `gap` None: MERGE_GAP."""
-    return find_groups(srt, {k: np.asarray(v)[perm] for k, v in img.ids.items()}, MERGE_GAP if gap is None else gap)
+    from .exr.inspect import id_columns   # uint ids and a float object id channel alike
+
+    return find_groups(srt, {k: np.asarray(v)[perm] for k, v in id_columns(img).items()},
+                       MERGE_GAP if gap is None else gap)
 
 
 def find_groups(srt: DeepImage, ids: dict | None = None, gap: float = MERGE_GAP) -> Groups | None:

@@ -76,12 +76,11 @@ def colour_channels(m: ChannelMap) -> list:
 def holdout_bins(img: DeepImage, lit_bin: np.ndarray) -> np.ndarray | None:
     """bool [N]: the bins of objects (the object id channel) with at least HOLDOUT_MIN_BINS bins and none lit, or
     None (no id channel, no such object)."""
-    from .exr.inspect import object_id_channel
+    from .exr.inspect import object_ids
 
-    name = object_id_channel(img)
-    if name is None:
+    ids = object_ids(img)
+    if ids is None:
         return None
-    ids = img.ids[name]
     black_ids, counts = np.unique(ids[~lit_bin], return_counts=True)
     hold = black_ids[(counts >= HOLDOUT_MIN_BINS) & ~np.isin(black_ids, np.unique(ids[lit_bin]))]
     return np.isin(ids, hold) if hold.size else None

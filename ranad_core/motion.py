@@ -131,10 +131,9 @@ def _fill_holes(field: np.ndarray, steps: int = FILL_STEPS) -> np.ndarray:
 
 
 def _object_ids(img: DeepImage):
-    from .exr.inspect import object_id_channel
+    from .exr.inspect import object_ids
 
-    name = object_id_channel(img)
-    return None if name is None else img.ids[name]
+    return object_ids(img)
 
 
 def _log_depth(img: DeepImage) -> np.ndarray:

@@ -255,3 +255,23 @@ def test_info_counts_thin_bins_a_chunk_at_a_time(monkeypatch):
     monkeypatch.setattr(deep_mod, "_CHUNK_BINS", 50)
     assert len(list(deep_mod.pixel_chunks(img.offsets))) > 20
     assert thin_bins(img, m) == whole
+
+
+def test_float_object_ids_keep_objects_apart():
+    """An object id channel stored as half/float (some tools write ids so) was not seen as one: bins of two
+    objects 1% apart in depth merged, each object taking the other's colour, and the frame read as deep-Z."""
+    from ranad_core.exr.inspect import guess_kind, id_columns, object_id_channel
+
+    n_pix = 6
+    z = np.tile([10.0, 10.1], n_pix).astype(np.float32)
+    rgb = np.tile([[1, 0.05, 0.05], [0.05, 0.05, 1]], (n_pix, 1)).astype(np.float32)
+    ids = np.tile([1.0, 2.0], n_pix).astype(np.float32)
+    vals = np.column_stack([rgb, np.full(2 * n_pix, 0.5, np.float32), z, ids])
+    img = DeepImage(vals, np.arange(0, 2 * n_pix + 1, 2), ["R", "G", "B", "A", "Z", "id"],
+                    data_window=(0, 0, n_pix - 1, 0),
+                    channel_types={"R": "half", "G": "half", "B": "half", "A": "half", "Z": "float", "id": "float"})
+    assert object_id_channel(img) == "id" and list(id_columns(img)) == ["id"] and guess_kind(img) == "deep-OID"
+    srt, perm = canonical(img, detect(img))[0].sorted()
+    assert binmerge.groups_of(srt, img, perm) is None                # the objects keep apart
+    plain = img.select(["R", "G", "B", "A", "Z"])
+    assert binmerge.groups_of(srt, plain, perm).merged == n_pix      # without the ids they would merge

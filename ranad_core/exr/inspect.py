@@ -20,10 +20,32 @@ OBJECT_ID_NAMES = ("id", "Id", "ID", "objectid", "object_id", "objectId")
 
 
 def object_id_channel(image: DeepImage) -> str | None:
+    """The channel holding object ids: a uint channel (by OBJECT_ID_NAMES first), else a half or float channel of
+    one of those names (some tools store ids as floats; bins of different objects must still keep apart)."""
     for name in OBJECT_ID_NAMES:
         if name in image.ids:
             return name
-    return next(iter(image.ids), None)
+    first = next(iter(image.ids), None)
+    if first is not None:
+        return first
+    return next((name for name in OBJECT_ID_NAMES if name in image.channels), None)
+
+
+def object_ids(image: DeepImage) -> np.ndarray | None:
+    """[N] the object ids of the bins (object_id_channel's values), None without an id channel."""
+    name = object_id_channel(image)
+    if name is None:
+        return None
+    return image.ids[name] if name in image.ids else image.channel(name)
+
+
+def id_columns(image: DeepImage) -> dict:
+    """name -> [N] of every channel that labels bins by object: the uint channels and a float object id channel
+    (what keeps bins of different objects from merging)."""
+    name = object_id_channel(image)
+    if name is None or name in image.ids:
+        return dict(image.ids)
+    return {**image.ids, name: image.channel(name)}
 
 
 def guess_kind(image: DeepImage) -> str:
@@ -32,12 +54,12 @@ def guess_kind(image: DeepImage) -> str:
     deep-OID files hold one bin per object per pixel (the paper's Sec. 2); a deep-Z file with ids has
     pixels where one object owns several depth bins. Images without ids are deep-Z.
     """
-    name = object_id_channel(image)
-    if name is None or image.num_bins == 0:
+    ids = object_ids(image)
+    if ids is None or image.num_bins == 0:
         return "deep-Z"
     pix = image.pixel_index()
-    order = np.lexsort((image.ids[name], pix))
-    p, i = pix[order], image.ids[name][order]
+    order = np.lexsort((ids, pix))
+    p, i = pix[order], ids[order]
     repeated = np.any((p[1:] == p[:-1]) & (i[1:] == i[:-1]))
     return "deep-Z" if repeated else "deep-OID"
 
@@ -59,10 +81,10 @@ def thin_bins(image: DeepImage, mapping) -> int:
     small = DeepImage(values=image.columns([src for _, src in direct]), offsets=image.offsets,
                       channels=[name for name, _ in direct], data_window=image.data_window)
     small = replace_nonfinite(small, DEPTHS)[0]   # over the whole frame: its largest depth fills non-finite ones
-    thin = 0
+    thin, labels = 0, id_columns(image)
     for b0, b1, offs in pixel_chunks(small.offsets):
         part = DeepImage(values=small.values[b0:b1], offsets=offs, channels=small.channels,
-                         ids={k: v[b0:b1] for k, v in image.ids.items()}, data_window=(0, 0, offs.size - 2, 0))
+                         ids={k: v[b0:b1] for k, v in labels.items()}, data_window=(0, 0, offs.size - 2, 0))
         srt, perm = part.sorted()
         groups = groups_of(srt, part, perm)
         thin += 0 if groups is None else part.num_bins - groups.merged
@@ -94,7 +116,8 @@ def _deep_stats(image: DeepImage, mapping=None) -> dict[str, Any]:
         "empty_pixels": float(1.0 - covered.mean()),
         "volume_samples": volume,
         "kind_guess": guess_kind(image),
-        "id_channels": list(image.ids),
+        "id_channels": [c if c in image.ids else f"{c} (stored as {image.channel_types.get(c, 'float')})"
+                        for c in id_columns(image)],
         "nonfinite_values": nonfinite,
         "measured_state": image.measured_state(),
         "thin_bins": 0 if mapping is None else thin_bins(image, mapping),
@@ -154,4 +177,4 @@ def _describe(path: str, layout, src, stats: bool, overrides: dict | None) -> di
     return out
 
 
-__all__ = ["describe", "guess_kind", "object_id_channel"]
+__all__ = ["describe", "guess_kind", "id_columns", "object_id_channel", "object_ids"]
