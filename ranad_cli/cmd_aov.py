@@ -33,7 +33,7 @@ def aov_cmd(cache, pattern, output, aov_input, device):
     emission components per bin (see ranad_core/aov.py). Outputs keep the AOV file's layout, channels and header.
     """
     from ranad_core import cache as cache_io
-    from ranad_core.aov import denoise_cached_frame
+    from ranad_core.aov import denoise_cached_frame, partial_layers
     from ranad_core.device import resolve
     from ranad_core.exr import read_header, resolve_part, write_deep, write_parts
     from ranad_core.exr.sequence import Frame, format_frame, is_pattern, output_path
@@ -91,6 +91,10 @@ def aov_cmd(cache, pattern, output, aov_input, device):
                 aov_files = [source_of(meta, None if frame is None else frame - int(meta["centre"]) + k, p)
                              for k, p in enumerate(json.loads(meta["window"]))]
                 image = denoise_cached_frame(models[spec], path, tensors, meta, pattern, aov_files)
+                partial = partial_layers(image.channels, pattern)
+                if partial:
+                    click.echo(f"ranad: warning: {src}: AOV layer(s) {', '.join(partial)} match {pattern!r} but lack "
+                               f".R, .G or .B: left noisy", err=True)
                 index = resolve_part(layout, meta.get("part") or None, src) if layout.multipart else 0
                 if index in replaced:
                     raise RanadError(f"two caches hold part {index} of this file", path)

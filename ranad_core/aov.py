@@ -47,6 +47,17 @@ def aov_layers(channels, pattern: str) -> dict:
     return {k: tuple(v[x] for x in RGB) for k, v in sorted(found.items()) if len(v) == 3}
 
 
+def partial_layers(channels, pattern: str) -> list:
+    """Layers matching `pattern` that have some but not all of .R/.G/.B: aov_layers leaves them out (they stay
+    noisy, and light groups no longer sum to the denoised beauty), which the commands say."""
+    found = {}
+    for c in channels:
+        layer, _, comp = c.rpartition(".")
+        if layer and fnmatch.fnmatchcase(layer, pattern) and comp in RGB:
+            found.setdefault(layer, set()).add(comp)
+    return sorted(k for k, v in found.items() if len(v) < 3)
+
+
 def kernel_rule(layer: str) -> str:
     low = layer.lower()
     if any(a.lower() in low for a in ALIASES["diffuse"]):

@@ -468,6 +468,12 @@ def _denoise_part(model, images, centre, flows, where, opts, summary, halo, tile
     if opts.aovs:
         with stage("aovs"):
             result.image = with_denoised_aovs(model, images, centre, mapping, result, opts.aovs, where, flows)
+        from .aov import partial_layers
+
+        partial = partial_layers(img.channels, opts.aovs)
+        if partial:
+            summary.messages.append(f"{where}: AOV layer(s) {', '.join(partial)} match {opts.aovs!r} but lack .R, .G "
+                                    f"or .B: left noisy")
     if not all_finite(result.image.values):   # the inputs were made finite: NaN/Inf here is the model's own
         n = nonfinite_bins(result.image.values)
         raise RanadError(f"the model's output has NaN/Inf in {n} bin(s) (broken or overflowing weights?); "

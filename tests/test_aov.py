@@ -14,7 +14,7 @@ from click.testing import CliRunner
 
 from model_factory import demodulating, input_keys_config, matching_config
 from ranad_cli.main import cli
-from ranad_core.aov import aov_layers, denoise_aovs, kernel_rule
+from ranad_core.aov import aov_layers, denoise_aovs, kernel_rule, partial_layers
 from ranad_core.channels import detect
 from ranad_core.denoise import denoise_window, is_cross_frame
 from ranad_core.exr import read_deep, write_deep
@@ -203,3 +203,18 @@ def test_aov_command_through_the_cache_and_refusals(tmp_path):
     r = run("aov", tmp_path / "flipped.ranadcache", "--layers", "lg_*", "--input", src / "b.0000.exr",
             "-o", tmp_path / "a6.exr")
     assert r.exit_code == 2 and "corrupt cache" in r.output and not (tmp_path / "a6.exr").exists()
+
+
+def test_a_matching_layer_without_its_blue_is_named(tmp_path):
+    """A light group with .R and .G but no .B matched the pattern and was left noisy without a word (the groups
+    then no longer sum to the denoised beauty): `--aovs` and `ranad aov` name it."""
+    chans = ["R", "G", "B", "lg_key.R", "lg_key.G", "lg_fill.R", "lg_fill.G", "lg_fill.B", "other.R"]
+    assert list(aov_layers(chans, "lg_*")) == ["lg_fill"] and partial_layers(chans, "lg_*") == ["lg_key"]
+    assert partial_layers(chans, "*") == ["lg_key", "other"]
+    img = read_deep(SHOT / "noisy_spp16.0001.exr")
+    write_deep(tmp_path / "nob.exr", img.select([c for c in img.channels if c != "lg_key.B"]))
+    r = CliRunner().invoke(cli, ["denoise", str(tmp_path / "nob.exr"), "-o", str(tmp_path / "d.exr"), "--aovs", "lg_*",
+                                 "--cache", str(tmp_path / "c")])
+    assert r.exit_code == 0 and "AOV layer(s) lg_key match 'lg_*' but lack .R, .G or .B: left noisy" in r.output
+    r = CliRunner().invoke(cli, ["aov", str(tmp_path / "c"), "--layers", "lg_*", "-o", str(tmp_path / "a.exr")])
+    assert r.exit_code == 0 and "AOV layer(s) lg_key match 'lg_*'" in r.output, r.output
