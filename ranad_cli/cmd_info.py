@@ -27,7 +27,9 @@ def _print_text(d: dict) -> None:
     for p in d["parts"]:
         name = f" '{p['name']}'" if p["name"] else ""
         w, h = p["resolution"]
-        click.echo(f"  part {p['index']}{name}: {p['type']}, {w}x{h}, compression {p['compression']}")
+        levels = (f", {p['levels']} levels (ranad reads the full-resolution one)"
+                  if p.get("levels") not in (None, "one") else "")
+        click.echo(f"  part {p['index']}{name}: {p['type']}, {w}x{h}, compression {p['compression']}{levels}")
         click.echo(f"    data window {tuple(p['data_window'])}, display window {tuple(p['display_window'])}")
         chans = ", ".join(f"{n}:{t}" for n, t in p["channels"].items())
         click.echo(f"    channels ({len(p['channels'])}): {chans}")

@@ -373,6 +373,12 @@ def denoise_shot(jobs, loaded, opts: ShotOptions, frame_bar=None, tile_bar=None,
             key = part_key(layout, index)
             part = None if not layout.multipart else key
             where = frame.path if not layout.multipart else f"{frame.path} ({part_label(layout, index)})"
+            tiles = layout.parts[index].tiles
+            if tiles and tiles[2] != 0:   # OpenEXR's MIPMAP_LEVELS / RIPMAP_LEVELS
+                msg = (f"{where}: a {'mip' if tiles[2] == 1 else 'rip'}mapped deep part: its full-resolution level "
+                       f"is denoised and written as scan lines, without the other levels")
+                if msg not in summary.messages:
+                    summary.messages.append(msg)
             with stage("read"):
                 try:
                     images = [store.get(f, part) for f in members]

@@ -428,3 +428,34 @@ def test_no_cursor_codes_in_a_log(tmp_path, model_file):
     assert r.output.splitlines()[-1].startswith("ranad: error: ") and "negative depth" in r.output
     r = run("denoise", FRAME, "-o", tmp_path / "ok.exr", "--model", model_file)
     assert r.exit_code == 0 and "\x1b[" not in r.output
+
+
+def test_a_mipmapped_deep_part_is_said_to_lose_its_levels(tmp_path, model_file):
+    """A mipmapped deep tiled file (OpenEXR writes them) came out as one scan-line level without a word: the run
+    says so, and `ranad info` shows the levels."""
+    import OpenEXR
+
+    h, w = 16, 20
+    rng = np.random.default_rng(0)
+    counts = rng.integers(1, 3, (h, w))
+
+    def chan(dtype, make):
+        a = np.empty((h, w), dtype=object)
+        for y in range(h):
+            for x in range(w):
+                a[y, x] = make(counts[y, x]).astype(dtype)
+        return a
+
+    z = chan("f", lambda n: np.sort(rng.uniform(1, 10, n)))
+    rgb, a = chan("e", lambda n: np.full(n, 0.3)), chan("e", lambda n: np.full(n, 0.5))
+    desc = OpenEXR.TileDescription()
+    desc.xSize, desc.ySize, desc.mode = 8, 8, OpenEXR.LevelMode.MIPMAP_LEVELS
+    src = str(tmp_path / "mip.exr")
+    OpenEXR.File({"type": OpenEXR.deeptile, "compression": OpenEXR.ZIPS_COMPRESSION, "tiles": desc},
+                 {"R": rgb, "G": rgb, "B": rgb, "A": a, "Z": z}).write(src)
+    r = run("info", src, "--no-stats")
+    assert r.exit_code == 0 and "mipmap levels (ranad reads the full-resolution one)" in r.output, r.output
+    r = run("denoise", src, "-o", tmp_path / "d.exr", "--model", model_file)
+    assert r.exit_code == 0 and "a mipmapped deep part: its full-resolution level is denoised and written as scan " \
+                                "lines, without the other levels" in r.output, r.output
+    assert read_deep(tmp_path / "d.exr").counts.reshape(h, w).tolist() == counts.tolist()

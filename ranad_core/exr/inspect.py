@@ -158,6 +158,7 @@ def _describe(path: str, layout, src, stats: bool, overrides: dict | None) -> di
         }
         if tiled and part.tiles:
             info["tiles"] = list(part.tiles[:2])
+            info["levels"] = ("one", "mipmap", "ripmap")[part.tiles[2]] if part.tiles[2] < 3 else str(part.tiles[2])
         if deep:
             from ..channels import detect_names, motion_candidates
             from ..errors import RanadError
