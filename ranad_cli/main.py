@@ -51,6 +51,10 @@ class RanadGroup(click.Group):
         except KeyboardInterrupt:
             click.echo("ranad: interrupted", err=True)
             ctx.exit(130)
+        except BrokenPipeError:   # `ranad info F | head`: the reader left; no traceback, and none at exit either
+            devnull = os.open(os.devnull, os.O_WRONLY)
+            os.dup2(devnull, sys.stdout.fileno())
+            ctx.exit(EXIT_INTERNAL_ERROR)
         except MemoryError as e:   # a frame larger than the memory the process may have (ulimit, a farm's cap)
             if ctx.obj and ctx.obj.get("debug"):
                 traceback.print_exc()

@@ -410,3 +410,15 @@ def test_bad_option_values_are_usage_errors(tmp_path, args):
     r = run(cmd, str(OBJECTID), "-o", str(out), *opt)
     assert r.exit_code == 2 and "Invalid value" in r.output and "internal error" not in r.output, r.output
     assert not out.exists()
+
+
+def test_a_closed_pipe_is_no_internal_error():
+    """`ranad info F | head -2`: the reader goes away before ranad writes; that was 'internal error:
+    BrokenPipeError' on stderr. Now quiet (exit 1, as a cut-off command), with no traceback at exit either."""
+    root = os.path.join(os.path.dirname(__file__), "..")
+    env = dict(os.environ, PYTHONPATH=os.path.abspath(root))
+    p = subprocess.Popen([sys.executable, "-m", "ranad_cli", "info", str(OBJECTID)], stdout=subprocess.PIPE,
+                         stderr=subprocess.PIPE, env=env)
+    p.stdout.close()   # before the first write: every write meets a closed pipe
+    err = p.stderr.read().decode()
+    assert p.wait(timeout=120) == 1 and "internal error" not in err and "Traceback" not in err, err
