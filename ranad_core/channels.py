@@ -276,7 +276,9 @@ def mapping_options(maps=(), preset: str | None = None, motion_units: str | None
             raise RanadError(f"--preset {preset!r}: unknown renderer (known: {', '.join(PRESETS)})", None)
         out["preset"] = preset
     given = any(v is not None for v in (motion_units, fps, shutter, motion_y))
-    motion_units, motion_y = motion_units or "pixels", motion_y or "down"
+    # the options not given keep the preset's conversion (one option used to reset the others to pixels, y down)
+    base = dict(PRESETS[preset].motion_conversion) if preset is not None else {}
+    motion_units, motion_y = motion_units or base.get("units") or "pixels", motion_y or base.get("y") or "down"
     if motion_units not in MOTION_UNITS:
         raise RanadError(f"--motion-units {motion_units!r}: use one of {', '.join(MOTION_UNITS)}", None)
     if motion_y not in ("up", "down"):

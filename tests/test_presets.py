@@ -226,3 +226,15 @@ def test_canonical_columns_against_the_definitions(original, layers):
             assert np.array_equal(got.channel(canon), img.channel(src))
     assert np.array_equal(got.channel(ALPHA), img.channel(m.alpha))
     assert np.array_equal(got.channel(DEPTH), img.channel(m.depth))
+
+
+def test_one_motion_option_keeps_the_presets_others():
+    """--shutter with --preset karma read Karma's NDC, y-up motion as pixels, y down: any one motion option reset
+    the others to the defaults instead of the preset's (the docstring's promise)."""
+    conv = lambda **k: mapping_options(**k)["motion"]  # noqa: E731
+    assert conv(preset="karma", shutter=0.5) == {"units": "ndc", "fps": None, "shutter": 0.5, "y": "up"}
+    assert conv(preset="karma", motion_y="down")["units"] == "ndc"
+    assert conv(preset="vray", motion_units="velocity", fps=24.0)["y"] == "up"
+    assert conv(shutter=0.5) == {"units": "pixels", "fps": None, "shutter": 0.5, "y": "down"}
+    with pytest.raises(RanadError, match="--fps only applies"):
+        mapping_options(preset="karma", fps=24.0)
