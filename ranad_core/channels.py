@@ -449,7 +449,7 @@ def canonical(img: DeepImage, m: ChannelMap) -> tuple[DeepImage, np.ndarray | No
     at = 0
     for block_names, src in blocks:
         if not isinstance(src, list):
-            values[:, at:at + len(block_names)] = np.asarray(src, np.float32).reshape(img.num_bins, -1)
+            values[:, at:at + len(block_names)] = np.asarray(src, np.float32).reshape(img.num_bins, len(block_names))
         at += len(block_names)
     if m.split:
         col = {c: i for i, c in enumerate(names)}

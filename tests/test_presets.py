@@ -238,3 +238,19 @@ def test_one_motion_option_keeps_the_presets_others():
     assert conv(shutter=0.5) == {"units": "pixels", "fps": None, "shutter": 0.5, "y": "down"}
     with pytest.raises(RanadError, match="--fps only applies"):
         mapping_options(preset="karma", fps=24.0)
+
+
+def test_an_empty_frame_with_a_summed_layer(original, tmp_path):
+    """A frame with no bins (an element out of view) whose diffuse is a sum (V-Ray's lighting + GI) was an
+    internal error (a reshape of 0 values), alone or as a neighbour; it denoises to an empty frame."""
+    from ranad_core.exr import write_deep
+
+    full = renderer_file(original, RENDERERS["vray"])
+    empty = DeepImage(np.zeros((0, len(full.channels)), np.float32), np.zeros(full.num_pixels + 1, np.int64),
+                      full.channels, data_window=full.data_window, display_window=full.display_window,
+                      channel_types=dict(full.channel_types))
+    write_deep(tmp_path / "e.exr", empty)
+    r = CliRunner().invoke(cli, ["denoise", "--preset", "vray", str(tmp_path / "e.exr"), "-o", str(tmp_path / "o.exr")])
+    assert r.exit_code == 0, r.output
+    assert read_deep(tmp_path / "o.exr").num_bins == 0
+    assert canonical(empty, detect(empty, mapping_options(preset="vray")))[0].num_bins == 0
