@@ -43,7 +43,9 @@ ALIASES = {
     "albedo": ("albedo", "Albedo", "diffuse_albedo", "denoise_albedo"),
     "normal": ("N", "normal", "Normal", "normals", "N_world"),
 }
-COMPONENTS = {"rgb": (("R", "G", "B"), ("r", "g", "b")), "xyz": (("X", "Y", "Z"), ("x", "y", "z")),
+# normals may come as .R/.G/.B too (V-Ray's normals, Redshift's and Karma's N), as the README's Renderers section says
+COMPONENTS = {"rgb": (("R", "G", "B"), ("r", "g", "b")),
+              "xyz": (("X", "Y", "Z"), ("x", "y", "z"), ("R", "G", "B"), ("r", "g", "b")),
               "xy": (("X", "Y"), ("x", "y"), ("R", "G"), ("r", "g"), ("u", "v"), ("U", "V"))}
 CANONICAL = {"diffuse": "diffuse", "specular": "specular", "emission": "emission", "albedo": "albedo", "normal": "N"}
 # The canonical channels by name (what `canonical` builds from a file's channels; the model inputs, metrics,

@@ -254,3 +254,15 @@ def test_an_empty_frame_with_a_summed_layer(original, tmp_path):
     assert r.exit_code == 0, r.output
     assert read_deep(tmp_path / "o.exr").num_bins == 0
     assert canonical(empty, detect(empty, mapping_options(preset="vray")))[0].num_bins == 0
+
+
+@pytest.mark.parametrize("preset, layer", [("vray", "normals"), ("karma", "N"), (None, "N")])
+def test_normals_with_colour_components_are_the_guide(original, preset, layer):
+    """Normals written as .R/.G/.B (V-Ray's normals, Redshift's and Karma's N) were not found: the run went on
+    'without guides' with nothing but a missing normal= in the map to say so."""
+    vals, names = original.values, list(original.channels)
+    for comp, rgb in zip("XYZ", "RGB"):
+        names[names.index(f"N.{comp}")] = f"{layer}.{rgb}"
+    img = DeepImage(vals, original.offsets, names, data_window=original.data_window)
+    m = detect(img, mapping_options(preset=preset) if preset else None)
+    assert m.layers["normal"] == (f"{layer}.R", f"{layer}.G", f"{layer}.B") and m.guides
