@@ -42,8 +42,8 @@ def aov_layers(channels, pattern: str) -> dict:
         if "." not in c:
             continue
         layer, comp = c.rsplit(".", 1)
-        if fnmatch.fnmatchcase(layer, pattern) and comp in RGB:
-            found.setdefault(layer, {})[comp] = c
+        if fnmatch.fnmatchcase(layer, pattern) and comp.upper() in RGB:   # .r/.g/.b too (Karma's LPE layers)
+            found.setdefault(layer, {})[comp.upper()] = c
     return {k: tuple(v[x] for x in RGB) for k, v in sorted(found.items()) if len(v) == 3}
 
 
@@ -53,8 +53,8 @@ def partial_layers(channels, pattern: str) -> list:
     found = {}
     for c in channels:
         layer, _, comp = c.rpartition(".")
-        if layer and fnmatch.fnmatchcase(layer, pattern) and comp in RGB:
-            found.setdefault(layer, set()).add(comp)
+        if layer and fnmatch.fnmatchcase(layer, pattern) and comp.upper() in RGB:
+            found.setdefault(layer, set()).add(comp.upper())
     return sorted(k for k, v in found.items() if len(v) < 3)
 
 

@@ -211,6 +211,9 @@ def test_a_matching_layer_without_its_blue_is_named(tmp_path):
     chans = ["R", "G", "B", "lg_key.R", "lg_key.G", "lg_fill.R", "lg_fill.G", "lg_fill.B", "other.R"]
     assert list(aov_layers(chans, "lg_*")) == ["lg_fill"] and partial_layers(chans, "lg_*") == ["lg_key"]
     assert partial_layers(chans, "*") == ["lg_key", "other"]
+    lower = ["LPE_rim.r", "LPE_rim.g", "LPE_rim.b", "LPE_key.R", "LPE_key.g"]   # Karma writes .r/.g/.b
+    assert aov_layers(lower, "LPE_*") == {"LPE_rim": ("LPE_rim.r", "LPE_rim.g", "LPE_rim.b")}
+    assert partial_layers(lower, "LPE_*") == ["LPE_key"]
     img = read_deep(SHOT / "noisy_spp16.0001.exr")
     write_deep(tmp_path / "nob.exr", img.select([c for c in img.channels if c != "lg_key.B"]))
     r = CliRunner().invoke(cli, ["denoise", str(tmp_path / "nob.exr"), "-o", str(tmp_path / "d.exr"), "--aovs", "lg_*",
