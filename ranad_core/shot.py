@@ -439,6 +439,17 @@ def _denoise_part(model, images, centre, flows, where, opts, summary, halo, tile
     any channel)."""
     img = images[centre]
     mapping = detect(img, opts.overrides, where)
+    if len(images) > 1 and not mapping.motion.found:
+        # a centre frame without motion channels of its own: its neighbours' (frame t-1's motion to t+1 and t+1's
+        # to t-1 carry them to it, one direction is enough) are read with the map they give
+        for k, other in enumerate(images):
+            try:
+                found = k != centre and detect(other, opts.overrides, where).motion
+            except RanadError:
+                continue
+            if found and found.found:
+                mapping.motion = found
+                break
     if opts.kind != "auto":                     # guess_kind sorts every bin: only when it is checked
         check_kind(img, opts.kind, where)
     bad = count_nonfinite(img)                  # every channel, not only those the model reads

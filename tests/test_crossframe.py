@@ -247,6 +247,31 @@ def test_a_neighbour_without_the_centres_channels_is_named(tmp_path):
     assert "that s.0000.exr has" in r.output and not list((tmp_path / "out").glob("*.exr"))
 
 
+def test_a_centre_frame_without_motion_reads_its_neighbours(tmp_path):
+    """Frames 0 and 2 carry motion, frame 1 not: the map detected on frame 1 had no motion, so its window ran
+    unaligned and the run warned that no motion channels were mapped. The neighbours' motion now carries them
+    (one direction is enough), without that warning."""
+    from safetensors.torch import save_file
+
+    from ranad_core.exr import read_deep, write_deep
+
+    _, cross = small_models()
+    model = tmp_path / "xf.safetensors"
+    save_file({k: v.contiguous() for k, v in cross.state_dict().items()}, str(model),
+              metadata={"model_config": json.dumps(cross.config.to_dict())})
+    shot = tmp_path / "shot"
+    shot.mkdir()
+    for n in range(3):
+        img = read_deep(SHOT / f"noisy_spp16.{n:04d}.exr")
+        assert "motion_next.X" in img.channels
+        if n == 1:
+            img = img.select([c for c in img.channels if not c.startswith(("motion_prev", "motion_next"))])
+        write_deep(shot / f"s.{n:04d}.exr", img)
+    r = CliRunner().invoke(cli, ["denoise", str(shot / "s.####.exr"), "-o", str(tmp_path / "out" / "d.####.exr"),
+                                 "--model", str(model)])
+    assert r.exit_code == 0 and "WITHOUT motion compensation" not in r.output, r.output
+
+
 def test_default_window_is_the_training_window(tmp_path):
     """Without --window a cross-frame model runs with the window its train_config records (offsets it never
     saw in training stay unused); files without that record get 3."""
