@@ -614,6 +614,8 @@ def _tidy_chunk(vals, offsets, ids, roles, cov_col, zi, zbi):
 
 # ---- tidy internals -------------------------------------------------------------------------------------
 SPLIT_PIECES = 64   # pieces a pixel's volumes may be cut into when tidied, per sample a pixel may hold on reading
+
+
 def _split_volumes(vals, pix, z, zb, counts, roles, zi, zbi):
     """Step 2 of tidy on sorted bins. Returns (src rows, new values, z, zb), sorted again, or None if nothing
     needs splitting. Only pixels holding a volume sample and at least two samples are looked at."""
