@@ -8,7 +8,9 @@ The handling lives in the group's ``invoke`` so click's CliRunner sees exactly w
 
 from __future__ import annotations
 
+import contextlib
 import os
+import signal
 import sys
 import traceback
 
@@ -32,13 +34,21 @@ import click
 
 from ranad_core import __version__
 from ranad_core.errors import RanadError
+from ranad_core.fileutil import Terminated
 
 EXIT_USER_ERROR = 2
 EXIT_INTERNAL_ERROR = 1
 
 
+def _terminate(signum, frame):
+    raise Terminated()
+
+
 class RanadGroup(click.Group):
     def invoke(self, ctx: click.Context):
+        previous = None
+        with contextlib.suppress(ValueError):   # signals can be set in the main thread only
+            previous = signal.signal(signal.SIGTERM, _terminate)
         try:
             return super().invoke(ctx)
         except (click.exceptions.Exit, click.exceptions.Abort, click.ClickException):
@@ -51,6 +61,9 @@ class RanadGroup(click.Group):
         except KeyboardInterrupt:
             click.echo("ranad: interrupted", err=True)
             ctx.exit(130)
+        except Terminated:   # a farm stopping the job: the temporary files are gone (atomic_output)
+            click.echo("ranad: terminated", err=True)
+            ctx.exit(128 + signal.SIGTERM)
         except BrokenPipeError:   # `ranad info F | head`: the reader left; no traceback, and none at exit either
             devnull = os.open(os.devnull, os.O_WRONLY)
             os.dup2(devnull, sys.stdout.fileno())
@@ -68,6 +81,9 @@ class RanadGroup(click.Group):
                 click.echo(f"ranad: internal error: {type(e).__name__}: {e} (rerun with --debug for details)",
                            err=True)
             ctx.exit(EXIT_INTERNAL_ERROR)
+        finally:
+            if previous is not None:
+                signal.signal(signal.SIGTERM, previous)
 
 
 @click.group(cls=RanadGroup, context_settings={"help_option_names": ["-h", "--help"]})

@@ -7,6 +7,7 @@ writer in ranad goes through :func:`atomic_output`.
 from __future__ import annotations
 
 import contextlib
+import errno
 import os
 import tempfile
 from typing import Iterator
@@ -23,6 +24,11 @@ def not_a_file(path: str) -> RanadError:
     return RanadError("no such file", path)
 
 
+#: the errors of a write the machine refused (the disk, the file system, the target), as libraries quote them
+WRITE_ERRNOS = (errno.ENOSPC, errno.EDQUOT, errno.EROFS, errno.EFBIG, errno.EACCES, errno.EPERM)
+TMP_EXTRA = 16   # what atomic_output's temporary name adds to the output's ("." + 8 random + ".tmp" + ...)
+
+
 def check_writable_target(path: str | os.PathLike) -> str:
     """Fail early (before any work) if ``path`` cannot be created; returns it as a string."""
     path = os.fspath(path)
@@ -33,7 +39,44 @@ def check_writable_target(path: str | os.PathLike) -> str:
         raise RanadError("output folder does not exist", path)
     if not os.access(folder, os.W_OK):
         raise RanadError("output folder is not writable", path)
+    try:
+        name_max = os.pathconf(folder, "PC_NAME_MAX")
+    except (OSError, ValueError, AttributeError):
+        name_max = 255
+    if len(os.fsencode(os.path.basename(path))) > name_max:
+        raise RanadError(f"file name longer than the {name_max} bytes the output folder allows", path)
     return path
+
+
+class Terminated(BaseException):
+    """SIGTERM (what a farm sends a job it stops), raised in the main thread so that every `atomic_output` block
+    on the way out removes its temporary file (the default action ends the process on the spot)."""
+
+
+def _tmp_prefix(path: str) -> str:
+    """The temporary's name before mkstemp's random part: the output's name, cut so that the whole temporary
+    name stays within a folder's 255-byte limit."""
+    name = os.path.basename(path)
+    while len(os.fsencode(name)) > 255 - TMP_EXTRA - len(os.fsencode(os.path.splitext(path)[1])) - 8:
+        name = name[:-1]
+    return "." + name + "."
+
+
+def _write_error(e: BaseException, folder: str) -> str | None:
+    """The one-line problem of a failed write (disk full, a file system gone read-only, a protected target),
+    or None for an exception that is no writing trouble. Libraries that write for us report a full disk in their
+    own ways (safetensors, torch.save: not OSError), so a full folder is looked at directly."""
+    if isinstance(e, OSError) and e.errno is not None:
+        return f"cannot write ({e.strerror or e})"
+    text = str(e)
+    for code in WRITE_ERRNOS:   # safetensors, torch.save and OIIO put the system's message in their own
+        if os.strerror(code) in text:
+            return f"cannot write ({os.strerror(code)})"
+    try:
+        full = os.statvfs(folder).f_bavail == 0
+    except (OSError, AttributeError):
+        full = False
+    return "cannot write (no space left on device)" if full else None
 
 
 def new_file_mode() -> int:
@@ -65,21 +108,26 @@ def atomic_output(path: str | os.PathLike, suffix: str | None = None) -> Iterato
     extension (OpenImageIO) pick the right one. On any exception the temporary is removed.
     """
     path = check_writable_target(path)
-    folder = os.path.dirname(os.path.abspath(path))
+    target = os.path.abspath(path)   # what the checks saw ("missing/../x.exr" is x.exr, as abspath says)
+    folder = os.path.dirname(target)
     if suffix is None:
         suffix = os.path.splitext(path)[1]
     try:  # the permission bits are not the whole story (root, read-only or special file systems, ACLs)
-        fd, tmp = tempfile.mkstemp(prefix="." + os.path.basename(path) + ".", suffix=".tmp" + suffix, dir=folder)
+        fd, tmp = tempfile.mkstemp(prefix=_tmp_prefix(path), suffix=".tmp" + suffix, dir=folder)
     except OSError as e:
         raise RanadError(f"cannot write in the output folder ({e.strerror or e})", path) from None
-    os.close(fd)
     try:
+        os.close(fd)
         yield tmp
         os.chmod(tmp, new_file_mode())       # mkstemp makes 0600 files: give the mode a plain open() would
         _fsync_file(tmp)                     # the data is on disk before the name points at it
-        os.replace(tmp, path)
+        os.replace(tmp, target)
         _fsync_dir(folder)                   # and the rename itself survives a power cut
-    except BaseException:
+    except BaseException as e:
         with contextlib.suppress(OSError):
             os.unlink(tmp)
+        problem = None if isinstance(e, (RanadError, KeyboardInterrupt, Terminated, SystemExit)) else \
+            _write_error(e, folder)
+        if problem is not None:   # disk full, read-only, protected: one line naming the output, not the temporary
+            raise RanadError(problem, path) from None
         raise

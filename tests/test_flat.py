@@ -222,8 +222,8 @@ def test_oiio_failure_leaves_no_temp(tmp_path):
 def test_failure_mid_write_leaves_no_partial_file(tmp_path, monkeypatch):
     real = flat._write_image
 
-    def half_then_fail(tmp, spec, data):
-        real(tmp, spec, data)  # a complete-looking file at the temporary name...
+    def half_then_fail(tmp, spec, data, path=None):
+        real(tmp, spec, data, path)  # a complete-looking file at the temporary name...
         assert os.path.exists(tmp)
         raise RanadError("disk full (simulated)", tmp)  # ...then the job dies before the rename
 

@@ -91,3 +91,101 @@ def test_denoise_keeps_compression_tiling_line_order_and_attributes(tmp_path, ti
     for c in untouched:
         assert np.array_equal(a.channel(c).view(np.uint32), b.channel(c).view(np.uint32)), c
     assert not np.array_equal(a.channel("R"), b.channel("R"))
+
+
+# ---- a farm's conditions: full disks, protected targets, SIGTERM, long and odd paths ----------------------------
+def test_a_write_the_machine_refuses_is_one_line_naming_the_output(tmp_path):
+    """A full disk (or a read-only file system, a protected target) was an internal error from whichever library
+    wrote (OSError, safetensors' SafetensorError, torch's RuntimeError), or named the temporary file: now one
+    RanadError naming the output, and no temporary left."""
+    import errno
+
+    from ranad_core.errors import RanadError
+
+    class LibraryError(Exception):   # how safetensors reports it: the system's message inside its own
+        pass
+
+    for exc in (OSError(errno.ENOSPC, os.strerror(errno.ENOSPC)),
+                LibraryError(f"Error while serializing: I/O error: {os.strerror(errno.ENOSPC)} (os error 28)")):
+        with pytest.raises(RanadError) as e:
+            with atomic_output(tmp_path / "out.exr") as tmp:
+                Path(tmp).write_bytes(b"partial")
+                raise exc
+        assert e.value.path == str(tmp_path / "out.exr") and e.value.problem == "cannot write (No space left on " \
+                                                                                  "device)"
+        assert os.listdir(tmp_path) == []
+    with pytest.raises(ZeroDivisionError):   # anything else is no writing trouble and passes unchanged
+        with atomic_output(tmp_path / "out.exr"):
+            raise ZeroDivisionError
+
+
+def test_sigterm_leaves_no_temporary(tmp_path):
+    """SIGTERM (a farm stopping a job) ended the process on the spot, leaving `.name.XXXX.tmp` files beside the
+    outputs; ranad's handler raises fileutil.Terminated, so every atomic_output on the way out cleans up, and the
+    CLI says 'terminated' with exit 143."""
+    import signal
+    import subprocess
+    import sys
+
+    script = (
+        "import os, signal, sys\n"
+        "from pathlib import Path\n"
+        "from ranad_cli.main import _terminate\n"
+        "from ranad_core.fileutil import atomic_output, Terminated\n"
+        "signal.signal(signal.SIGTERM, _terminate)\n"
+        "try:\n"
+        f"    with atomic_output({str(tmp_path / 'out.exr')!r}) as tmp:\n"
+        "        Path(tmp).write_bytes(b'half')\n"
+        "        os.kill(os.getpid(), signal.SIGTERM)\n"
+        "        signal.pause()\n"
+        "except Terminated:\n"
+        "    sys.exit(7)\n")
+    root = str(Path(__file__).resolve().parents[1])
+    r = subprocess.run([sys.executable, "-c", script], env=dict(os.environ, PYTHONPATH=root), timeout=120)
+    assert r.returncode == 7 and os.listdir(tmp_path) == []
+    from click.testing import CliRunner
+
+    import ranad_cli.cmd_info as cmd_info
+    from ranad_cli.main import cli
+    from ranad_core.fileutil import Terminated
+
+    def stopped(*a, **k):
+        raise Terminated()
+
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(cmd_info, "describe", stopped)
+        res = CliRunner().invoke(cli, ["info", str(SHOT / "noisy_spp16.0001.exr")])
+    assert res.exit_code == 128 + signal.SIGTERM and res.output.strip() == "ranad: terminated"
+
+
+def test_long_names_and_dotdot_paths(tmp_path):
+    """A 250-byte output name (legal) was refused after the work (the temporary's name is longer); a name over
+    the folder's limit is refused before any work; 'missing/../x.exr' was an internal error at the rename."""
+    from ranad_core.errors import RanadError
+    from ranad_core.fileutil import check_writable_target
+
+    long = tmp_path / ("n" * 246 + ".exr")
+    with atomic_output(long) as tmp:
+        Path(tmp).write_bytes(b"x")
+    assert long.read_bytes() == b"x"
+    with pytest.raises(RanadError, match="file name longer than the 255 bytes"):
+        check_writable_target(tmp_path / ("n" * 256 + ".exr"))
+    with atomic_output(str(tmp_path / "missing" / ".." / "x.exr")) as tmp:
+        Path(tmp).write_bytes(b"y")
+    assert (tmp_path / "x.exr").read_bytes() == b"y"
+
+
+def test_a_preview_is_not_written_to_a_full_disk(tmp_path, monkeypatch):
+    """OIIO's PNG writer reported nothing on a full disk (a truncated PNG, exit 0) and libjpeg ended the process
+    (exit 1, its temporary left): the folder's free space is checked first."""
+    from ranad_core.errors import RanadError
+    from ranad_core.exr.flat import write_flat
+
+    class Full:
+        f_bavail, f_frsize = 1, 4096
+
+    monkeypatch.setattr(os, "statvfs", lambda p: Full())
+    for ext in ("png", "jpg"):
+        with pytest.raises(RanadError, match="no space left on device"):
+            write_flat(tmp_path / f"p.{ext}", np.ones((64, 64, 3), np.float32), ["R", "G", "B"], (0, 0, 63, 63))
+    assert os.listdir(tmp_path) == []

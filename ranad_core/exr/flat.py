@@ -74,23 +74,53 @@ def _set_attributes(spec: oiio.ImageSpec, attributes: Mapping[str, object] | Non
         spec.attribute(name, value)
 
 
-def _write_image(tmp: str, spec: oiio.ImageSpec, data: np.ndarray) -> None:
-    """Write ``data`` to ``tmp`` with OIIO, turning any failure into a RanadError with OIIO's message.
+def _write_image(tmp: str, spec: oiio.ImageSpec, data: np.ndarray, path: str | None = None) -> None:
+    """Write ``data`` to ``tmp`` with OIIO, turning any failure into a RanadError with OIIO's message, naming
+    ``path`` (the output the temporary becomes).
 
-    The caller's ``atomic_output`` removes ``tmp`` when this raises, so a failed write leaves nothing.
+    The caller's ``atomic_output`` removes ``tmp`` when this raises, so a failed write leaves nothing. OIIO's PNG
+    writer reports no error on a full disk (a truncated file came out, exit 0) and libjpeg ends the process on
+    one, so the folder's free space is checked before a preview is written and the preview read back after.
     """
+    path = path or tmp
+    folder = os.path.dirname(os.path.abspath(tmp))
+    preview = os.path.splitext(tmp)[1].lower() in PREVIEW_EXTENSIONS
+    if preview:
+        try:
+            st = os.statvfs(folder)
+            free = st.f_bavail * st.f_frsize
+        except (OSError, AttributeError):
+            free = None
+        if free is not None and free < data.size + (1 << 16):   # at most a byte a value, plus headers
+            raise RanadError(f"cannot write (no space left on device: {free} bytes free)", path)
+    def failed(message: str) -> RanadError:   # OIIO names the temporary and says only that the write failed
+        try:
+            st = os.statvfs(folder)
+            full = st.f_bavail == 0
+        except (OSError, AttributeError):
+            full = False
+        return RanadError("cannot write (no space left on device)" if full else f"cannot write image: {message}", path)
+
     out = oiio.ImageOutput.create(tmp)
     if out is None:
-        raise RanadError(f"cannot write image: {oiio.geterror() or 'no OpenImageIO writer for this format'}", tmp)
+        raise failed(oiio.geterror() or "no OpenImageIO writer for this format")
     try:
         if not out.open(tmp, spec):
-            raise RanadError(f"cannot write image: {out.geterror() or oiio.geterror()}", tmp)
+            raise failed(out.geterror() or oiio.geterror())
         if not out.write_image(data):
-            raise RanadError(f"cannot write image: {out.geterror() or oiio.geterror()}", tmp)
+            raise failed(out.geterror() or oiio.geterror())
     finally:
         closed = out.close()
     if not closed:
-        raise RanadError(f"cannot write image: {out.geterror() or oiio.geterror()}", tmp)
+        raise failed(out.geterror() or oiio.geterror())
+    if preview:
+        inp = oiio.ImageInput.open(tmp)
+        ok = inp is not None and inp.read_image(0, 0, 0, -1, oiio.UINT8) is not None
+        if inp is not None:
+            inp.close()
+        if not ok:
+            raise RanadError(f"cannot write image (it does not read back: {oiio.geterror() or 'truncated'}; "
+                             "is the disk full?)", path)
 
 
 def _find_channel(channels: Sequence[str], key: str) -> int | None:
@@ -224,7 +254,7 @@ def write_flat(
     _set_attributes(spec, attributes)
 
     with atomic_output(path) as tmp:
-        _write_image(tmp, spec, data)
+        _write_image(tmp, spec, data, os.fspath(path))
 
 
 def read_flat(path: str | os.PathLike) -> tuple[np.ndarray, list[str], Window, Window]:
