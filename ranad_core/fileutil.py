@@ -48,6 +48,17 @@ def check_writable_target(path: str | os.PathLike) -> str:
     return path
 
 
+def probe_writable(folder: str) -> None:
+    """Create and remove a file in `folder` (RanadError naming it when that fails): what a long job checks
+    before its work, since permission bits are not the whole story (root, immutable or read-only mounts)."""
+    try:
+        fd, probe = tempfile.mkstemp(prefix=".ranad-probe.", dir=folder)
+        os.close(fd)
+        os.unlink(probe)
+    except OSError as e:
+        raise RanadError(f"cannot write in this folder ({e.strerror or e})", folder) from None
+
+
 class Terminated(BaseException):
     """SIGTERM (what a farm sends a job it stops), raised in the main thread so that every `atomic_output` block
     on the way out removes its temporary file (the default action ends the process on the spot)."""

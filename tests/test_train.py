@@ -761,3 +761,22 @@ def test_composite_coarse_charges_lost_energy():
     assert coarse_smape(corner, torch.ones(3, 6, 6), (4,)).item() > 0
 
     _check_optional_term("composite_coarse", lambda d: d * 0.5)
+
+
+def test_an_unwritable_run_folder_is_refused_before_training(tmp_path, monkeypatch):
+    """A run folder that cannot be made was an internal error; one that cannot be written to was found at the
+    first checkpoint, --checkpoint-every steps of work later: both are one-line errors before step 1."""
+    from ranad_core import fileutil
+
+    ds = dataset_from_example(tmp_path / "ds")
+    (tmp_path / "afile").write_text("")
+    r = CliRunner().invoke(cli, ["train", str(ds), "-o", str(tmp_path / "afile" / "run"), "--steps", "1"])
+    assert r.exit_code == 2 and "cannot create the run folder" in r.output, r.output
+
+    def refuse(*a, **k):
+        raise PermissionError(1, "Operation not permitted")
+
+    monkeypatch.setattr(fileutil.tempfile, "mkstemp", refuse)
+    r = CliRunner().invoke(cli, ["train", str(ds), "-o", str(tmp_path / "run"), "--steps", "1"])
+    assert r.exit_code == 2 and "cannot write in this folder (Operation not permitted)" in r.output, r.output
+    assert not (tmp_path / "run" / "checkpoint.pt").exists()

@@ -17,7 +17,7 @@ import numpy as np
 import torch
 
 from ..errors import RanadError
-from ..fileutil import atomic_output
+from ..fileutil import atomic_output, probe_writable
 from ..model import RaNAD, feature_dim, get_config, prepare
 from .data import (find_frame_pairs, find_pairs, frame_context, normal_rotation, reduce_inputs, reduce_window,
                    sample, sample_consecutive, sample_window)
@@ -352,7 +352,11 @@ def train(cfg: TrainConfig, progress=None) -> dict:
         raise RanadError("data-parallel training runs on the CPU only (one process on a GPU)", "--device")
     model = build_model(cfg, config).to(cfg.device)
     freeze_spatial(model, cfg)
-    os.makedirs(cfg.run, exist_ok=True)           # after every check: a refused run leaves no folder
+    try:   # after every check: a refused run leaves no folder
+        os.makedirs(cfg.run, exist_ok=True)
+    except OSError as e:
+        raise RanadError(f"cannot create the run folder ({e.strerror or e})", cfg.run) from None
+    probe_writable(cfg.run)   # now, not at the first checkpoint, steps of work later
     opt = torch.optim.AdamW(param_groups(model), lr=cfg.lr, weight_decay=cfg.weight_decay)
     rng = np.random.default_rng(cfg.seed if world == 1 else [cfg.seed, rank])
     step = 0
