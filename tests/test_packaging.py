@@ -53,6 +53,31 @@ def test_the_build_compiles_the_staged_copy_of_the_sources():
         assert (folder / extension.STAGED / name).read_bytes() == (extension.SOURCE_DIR / name).read_bytes()
 
 
+def test_a_read_only_kernel_cache_is_used_as_it_is(monkeypatch, tmp_path):
+    """A farm's prebuilt kernel cache mounted read-only: the build lock could not be opened there, so ranad fell
+    back to the slow torch reference (2.5 s against 0.4 s a frame). The folder's name carries the sources'
+    digest and the CPU type, so its module is imported as it is, nothing written."""
+    import os
+    import shutil
+
+    from ranad_core.rana import extension
+
+    ext = extension.load_cpu_extension()
+    built = Path(ext.__file__).parent
+    monkeypatch.setenv("RANAD_KERNEL_CACHE", str(tmp_path))
+    name = built.name
+    folder = extension.build_folder(name)
+    folder.mkdir(parents=True)
+    shutil.copy(built / f"{name}.so", folder / f"{name}.so")
+    real_access = os.access
+    monkeypatch.setattr(extension.os, "access", lambda p, mode: False if Path(p) == folder and mode == os.W_OK
+                        else real_access(p, mode))
+    monkeypatch.setattr(extension, "build_lock", lambda *a, **k: (_ for _ in ()).throw(AssertionError("built")))
+    module = extension._build("C++", name, extension.CPU_SOURCES, extension.CPU_HEADERS)
+    assert hasattr(module, "forward")   # (Python hands back the module already loaded under that name)
+    assert sorted(p.name for p in folder.iterdir()) == [f"{name}.so"]
+
+
 def test_staged_sources_are_written_only_when_they_differ(tmp_path):
     from ranad_core.rana import extension
 

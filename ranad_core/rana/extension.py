@@ -101,18 +101,38 @@ def _build(what: str, name: str, sources, headers, **kwargs):
 
     try:
         folder = build_folder(name)
+        so = folder / f"{name}.so"
+        if so.is_file() and not os.access(folder, os.W_OK):
+            # a farm's shared cache mounted read-only: its folder's name carries the sources' digest and the CPU
+            # type, so the module there is this build; torch's builder would need to write (its lock, ninja)
+            return _import_built(name, so)
         folder.mkdir(parents=True, exist_ok=True)
         with build_lock(folder, what):
             src = staged_sources(folder, tuple(sources) + tuple(headers))
-            if not (folder / f"{name}.so").is_file():
+            ninja = folder / "build.ninja"   # it names the sources by path: a cache copied elsewhere rebuilds
+            moved = ninja.is_file() and str(src) not in ninja.read_text(errors="replace")
+            if not so.is_file() or moved:
                 print(f"ranad: building the {what} RaNA kernels for this machine (once per CPU type and version, a "
-                      f"minute or two) in {folder}", file=sys.stderr, flush=True)
+                      f"minute or two) in {folder}" + (" (the folder was built elsewhere)" if moved else ""),
+                      file=sys.stderr, flush=True)
             return load(name=name, sources=[str(src / n) for n in sources], build_directory=str(folder),
                         verbose=False, **kwargs)
     except Exception as e:  # noqa: BLE001 - any build failure means: use the reference
         lines = str(e).strip().splitlines() or ["unknown error"]
         first_error = next((ln for ln in lines if "error" in ln.lower()), lines[-1])
         raise BuildUnavailable(f"building the {what} RaNA kernels failed: {first_error.strip()}") from e
+
+
+def _import_built(name: str, so: Path):
+    """The already built module `so` imported as it is (no build step, nothing written)."""
+    import importlib
+    import importlib.util
+
+    importlib.import_module("torch")   # the module links against torch's libraries, loaded with it
+    spec = importlib.util.spec_from_file_location(name, str(so))
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
 
 
 STAGED = "src"            # the build folder's copy of the sources
