@@ -285,7 +285,7 @@ def mapping_options(maps=(), preset: str | None = None, motion_units: str | None
         raise RanadError(f"--motion-units {motion_units!r}: use one of {', '.join(MOTION_UNITS)}", None)
     if motion_y not in ("up", "down"):
         raise RanadError(f"--motion-y {motion_y!r}: use up or down", None)
-    if motion_units == "velocity" and not fps:
+    if motion_units == "velocity" and fps is None:
         raise RanadError("--motion-units velocity needs --fps (frames per second)", None)
     if fps is not None and not (np.isfinite(fps) and fps > 0):
         raise RanadError(f"--fps {fps}: must be a positive number", None)

@@ -357,7 +357,7 @@ def denoise_shot(jobs, loaded, opts: ShotOptions, frame_bar=None, tile_bar=None,
     first_display = {}
     for frame, out in jobs:
         t0 = time.perf_counter()
-        if opts.skip_existing and os.path.exists(out):
+        if opts.skip_existing and _already_done(frame, out, opts):
             summary.skipped += 1
             if frame_bar:
                 frame_bar(1)
@@ -431,6 +431,23 @@ def denoise_shot(jobs, loaded, opts: ShotOptions, frame_bar=None, tile_bar=None,
         if frame_bar:
             frame_bar(1)
     return summary
+
+
+def _already_done(frame, out: str, opts: ShotOptions) -> bool:
+    """--skip-existing: the output is there and not empty (outputs are renamed into place whole, so an empty one
+    is somebody else's), and with --cache so is every cache the frame writes (a job killed between the two, or
+    run without --cache before, would otherwise leave `ranad aov` nothing to read for it)."""
+    if not os.path.isfile(out) or os.path.getsize(out) == 0:
+        return False
+    if not opts.cache_dir:
+        return True
+    try:
+        layout = read_header(frame.path)
+        chosen = select_parts(layout, frame.path, opts.parts, opts.overrides)
+    except RanadError:
+        return False   # the run says what is wrong with it
+    return all(os.path.isfile(cache_io.cache_path(opts.cache_dir, out, None if len(chosen) == 1 else
+                                                  str(part_key(layout, i)))) for i in chosen)
 
 
 def _denoise_part(model, images, centre, flows, where, opts, summary, halo, tile_bar, warn, priors=None):

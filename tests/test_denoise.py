@@ -198,6 +198,17 @@ def test_shards_cover_the_shot_once_and_skip_existing_resumes(tmp_path, model_fi
     assert r.exit_code == 0 and "denoised 1 frame(s)" in r.output and "skipped 2 existing" in r.output
     r = run("denoise", pattern, "-o", out / "d.####.exr", "--model", model_file, "--shard", "3/2")
     assert r.exit_code == 2 and "shard" in r.output
+    # an empty output (somebody else's: ranad renames whole files into place) is not a done frame; with --cache a
+    # frame is done only with its cache too (ranad aov found none for frames a resumed run had skipped)
+    (out / "d.0002.exr").write_bytes(b"")
+    r = run("denoise", pattern, "-o", out / "d.####.exr", "--model", model_file, "--skip-existing", "--cache",
+            tmp_path / "c")
+    assert r.exit_code == 0 and "denoised 3 frame(s)" in r.output, r.output
+    assert len(list((tmp_path / "c").glob("*.ranadcache"))) == 3 and (out / "d.0002.exr").stat().st_size > 0
+    os.remove(tmp_path / "c" / "d.0000.ranadcache")
+    r = run("denoise", pattern, "-o", out / "d.####.exr", "--model", model_file, "--skip-existing", "--cache",
+            tmp_path / "c")
+    assert r.exit_code == 0 and "denoised 1 frame(s)" in r.output and "skipped 2 existing" in r.output
 
 
 def test_cache_is_written_and_refused_when_stale(tmp_path, model_file):

@@ -238,6 +238,8 @@ def test_one_motion_option_keeps_the_presets_others():
     assert conv(shutter=0.5) == {"units": "pixels", "fps": None, "shutter": 0.5, "y": "down"}
     with pytest.raises(RanadError, match="--fps only applies"):
         mapping_options(preset="karma", fps=24.0)
+    with pytest.raises(RanadError, match="--fps 0.0: must be a positive number"):   # not "needs --fps"
+        mapping_options(motion_units="velocity", fps=0.0)
 
 
 def test_an_empty_frame_with_a_summed_layer(original, tmp_path):
