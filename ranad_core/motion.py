@@ -91,8 +91,10 @@ def _targets(img: DeepImage, dxy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(target pixel of every bin moved by dxy, rounded to the nearest; whether it is inside the frame)."""
     w, h = img.width, img.height
     y, x = np.divmod(img.pixel_index(), w)
-    tx = np.floor(x + dxy[:, 0] + 0.5).astype(np.int64)
-    ty = np.floor(y + dxy[:, 1] + 0.5).astype(np.int64)
+    # a motion beyond the frame's size lands outside it whatever its size; clipped, 3e38 px casts to int64 cleanly
+    lim = 2.0 * (w + h) + 2.0
+    tx = np.floor(x + np.clip(dxy[:, 0], -lim, lim) + 0.5).astype(np.int64)
+    ty = np.floor(y + np.clip(dxy[:, 1], -lim, lim) + 0.5).astype(np.int64)
     inside = (tx >= 0) & (tx < w) & (ty >= 0) & (ty < h)
     return np.where(inside, ty * w + tx, -1), inside
 

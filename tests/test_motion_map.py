@@ -193,3 +193,21 @@ def test_denoise_warns_once_without_motion_and_uses_the_mapping(tmp_path):
     r = CliRunner().invoke(cli, ["denoise", pattern, "-o", str(tmp_path / "d.####.exr"), "--model", model,
                                  "--map", "motion_prev=vx,vy"])
     assert r.exit_code == 2 and "beauty.0000.exr" in r.output and "motion_prev=vx,vy: no such channels" in r.output
+
+
+def test_motion_far_beyond_the_frame_lands_outside_it():
+    """A motion of 3e38 px cast to int64 with a numpy 'invalid value' warning (and an undefined target); such a bin
+    is carried out of the frame, like any motion past its edge, without a warning."""
+    import warnings
+
+    from ranad_core.motion import _targets
+
+    img = DeepImage(np.zeros((4, 5), np.float32), [0, 1, 2, 3, 4], ["R", "G", "B", "A", "Z"],
+                    data_window=(0, 0, 1, 1))
+    dxy = np.array([[3e38, 0], [-3e38, 0], [0, 1e30], [1, 0]], np.float32)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        target, inside = _targets(img, dxy)
+    assert inside.tolist() == [False, False, False, False] and target.tolist() == [-1, -1, -1, -1]
+    target, inside = _targets(img, np.array([[0, 0], [-1, 0], [0, 0], [0, -1]], np.float32))
+    assert inside.all() and target.tolist() == [0, 0, 2, 1]
