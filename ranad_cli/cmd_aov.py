@@ -36,7 +36,7 @@ def aov_cmd(cache, pattern, output, aov_input, device):
     from ranad_core.aov import denoise_cached_frame, partial_layers
     from ranad_core.device import resolve
     from ranad_core.exr import read_header, resolve_part, write_deep, write_parts
-    from ranad_core.exr.sequence import Frame, format_frame, is_pattern, output_path
+    from ranad_core.exr.sequence import Frame, format_frame, is_pattern, output_paths
     from ranad_core.fileutil import check_writable_target
     from ranad_core.model.store import load_model
 
@@ -66,19 +66,17 @@ def aov_cmd(cache, pattern, output, aov_input, device):
         return aov_input
 
     # one output per AOV file: the caches of a multi-part file's parts (one each) go into the same output, written
-    # once with every part; two different AOV files meeting in one output is an error, not an overwrite
-    outputs = {}   # output -> (AOV file, output, [(cache, tensors, meta, frame)])
+    # once with every part; two different AOV files meeting in one output is an error (output_paths)
     sources = [source_of(meta, frame, meta["input"]) for (_, _, meta), frame in zip(entries, frames)]
-    for (path, tensors, meta), frame, src in zip(entries, frames, sources):
+    for src in sources:
         if not os.path.isfile(src):
             raise RanadError("AOV file not found", src)
-        out = output_path(output, Frame(src, frame), len(set(sources)))
-        key = os.path.normcase(os.path.abspath(out))
-        if key in outputs and os.path.abspath(outputs[key][0]) != os.path.abspath(src):
-            raise RanadError(f"{outputs[key][0]} and {src} would both be written to this output; give each its own "
-                             f"pattern or folder", out)
+    outputs = {}   # output -> (AOV file, output, [(cache, tensors, meta, frame)])
+    outs = output_paths(output, [Frame(src, frame) for src, frame in zip(sources, frames)])
+    for (path, tensors, meta), frame, src, out in zip(entries, frames, sources, outs):
         check_writable_target(out)
-        outputs.setdefault(key, (src, out, []))[2].append((path, tensors, meta, frame))
+        outputs.setdefault(os.path.normcase(os.path.abspath(out)), (src, out, []))[2].append((path, tensors, meta,
+                                                                                              frame))
     models = {}
     with tqdm(total=len(entries), desc="aov", unit="frame", disable=len(entries) <= 1) as bar:
         for src, out, parts in outputs.values():

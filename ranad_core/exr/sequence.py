@@ -261,12 +261,13 @@ def output_path(
 def output_paths(out_spec: str | os.PathLike, frames: Sequence[Frame], ext: str | None = None) -> list[str]:
     """:func:`output_path` of every input, refusing two inputs that would be written to the same file (two
     shots' frame 1 into one pattern, two folders' x.exr into one folder): the second would silently replace the
-    first."""
+    first. The same input listed again (one file's parts, each with its AOV cache) goes to the same output."""
     paths, first = [], {}
+    n_inputs = len({os.path.abspath(f.path) for f in frames})
     for f in frames:
-        path = output_path(out_spec, f, len(frames), ext)
+        path = output_path(out_spec, f, n_inputs, ext)
         key = os.path.normcase(os.path.abspath(path))
-        if key in first:
+        if key in first and os.path.abspath(first[key]) != os.path.abspath(f.path):
             raise RanadError(f"{first[key]} and {f.path} would both be written to this output; give each its own "
                              f"pattern or folder", path)
         first[key] = f.path
