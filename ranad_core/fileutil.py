@@ -83,11 +83,16 @@ def _write_error(e: BaseException, folder: str) -> str | None:
     for code in WRITE_ERRNOS:   # safetensors, torch.save and OIIO put the system's message in their own
         if os.strerror(code) in text:
             return f"cannot write ({os.strerror(code)})"
+    return "cannot write (no space left on device)" if free_bytes(folder) == 0 else None
+
+
+def free_bytes(folder: str) -> int | None:
+    """Bytes an unprivileged write may still put in `folder`'s file system (None where that cannot be asked)."""
     try:
-        full = os.statvfs(folder).f_bavail == 0
+        st = os.statvfs(folder)
     except (OSError, AttributeError):
-        full = False
-    return "cannot write (no space left on device)" if full else None
+        return None
+    return st.f_bavail * st.f_frsize
 
 
 def new_file_mode() -> int:

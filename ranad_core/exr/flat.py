@@ -23,7 +23,7 @@ import numpy as np
 import OpenImageIO as oiio
 
 from ..errors import RanadError
-from ..fileutil import atomic_output, check_writable_target, not_a_file
+from ..fileutil import atomic_output, check_writable_target, free_bytes, not_a_file
 
 __all__ = ["write_flat", "read_flat", "srgb_oetf", "PREVIEW_EXTENSIONS", "FLAT_EXTENSIONS"]
 
@@ -86,19 +86,11 @@ def _write_image(tmp: str, spec: oiio.ImageSpec, data: np.ndarray, path: str | N
     folder = os.path.dirname(os.path.abspath(tmp))
     preview = os.path.splitext(tmp)[1].lower() in PREVIEW_EXTENSIONS
     if preview:
-        try:
-            st = os.statvfs(folder)
-            free = st.f_bavail * st.f_frsize
-        except (OSError, AttributeError):
-            free = None
+        free = free_bytes(folder)
         if free is not None and free < data.size + (1 << 16):   # at most a byte a value, plus headers
             raise RanadError(f"cannot write (no space left on device: {free} bytes free)", path)
     def failed(message: str) -> RanadError:   # OIIO names the temporary and says only that the write failed
-        try:
-            st = os.statvfs(folder)
-            full = st.f_bavail == 0
-        except (OSError, AttributeError):
-            full = False
+        full = free_bytes(folder) == 0
         return RanadError("cannot write (no space left on device)" if full else f"cannot write image: {message}", path)
 
     out = oiio.ImageOutput.create(tmp)
