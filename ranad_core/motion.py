@@ -33,6 +33,7 @@ import numpy as np
 
 from .channels import ALPHA, CANONICAL_MOTION, DEPTH, MotionSpec  # A, Z: required (detect refuses frames without)
 from .deep import DeepImage, gather_bins
+from .exr.inspect import object_ids
 
 PREV, NEXT = "motion_prev", "motion_next"
 FLOW_CHANNELS = (*CANONICAL_MOTION[PREV], *CANONICAL_MOTION[NEXT])
@@ -132,12 +133,6 @@ def _fill_holes(field: np.ndarray, steps: int = FILL_STEPS) -> np.ndarray:
     return f.astype(np.float32)
 
 
-def _object_ids(img: DeepImage):
-    from .exr.inspect import object_ids
-
-    return object_ids(img)
-
-
 def _log_depth(img: DeepImage) -> np.ndarray:
     z = np.nan_to_num(img.channel(DEPTH).astype(np.float64), nan=1e30, posinf=1e30)
     return np.log(np.maximum(z, 1e-6))
@@ -156,7 +151,7 @@ class _Candidates:
         logz = _log_depth(img)[rows]
         order = np.lexsort((logz, pix))                   # by pixel, front-most first
         self.rows, self.xy, self.pix, self.logz = rows[order], xy[order], pix[order], logz[order]
-        ids = _object_ids(img)
+        ids = object_ids(img)
         self.ids = None if ids is None else ids[self.rows]
         self.w, self.h = w, h
 
@@ -229,7 +224,7 @@ def _inverse(src: DeepImage, dst: DeepImage, dst_vec: np.ndarray) -> tuple[np.nd
     field[pix] = -dst_vec[rows]
     field = _fill_holes(field.reshape(h, w, 2))
     if src.num_bins:
-        best = landing.match(_pixel_xy(src), _log_depth(src), _object_ids(src), MATCH_RADIUS)
+        best = landing.match(_pixel_xy(src), _log_depth(src), object_ids(src), MATCH_RADIUS)
         hit = best >= 0
         per_bin[hit] = -dst_vec[best[hit]]
     return per_bin, field
@@ -332,7 +327,7 @@ def displacement(frames: list, index: int, centre: int, flows: list | None = Non
     if d is None:
         return np.zeros((n, 2), np.float32)
     pos = _pixel_xy(img)
-    logz, ids = _log_depth(img), _object_ids(img)
+    logz, ids = _log_depth(img), object_ids(img)
     hop = d.copy()
     for k in range(index + step, centre, step):
         nxt = win.hop(k, name, pos + d, logz, ids)
