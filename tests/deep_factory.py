@@ -67,3 +67,14 @@ def write_bad_compression(src: str, dst, code: int = 200) -> None:
     i = data.index(b"compression\0compression\0")
     data[i + 24 + 4] = code
     open(dst, "wb").write(bytes(data))
+
+
+def openexr_deep_channel(counts: np.ndarray, dtype: str, make) -> np.ndarray:
+    """A deep channel as the OpenEXR Python module takes it: an [H, W] object array whose pixel (y, x) holds
+    make(counts[y, x]) (an array of that many samples) as `dtype` ("e" half, "f" float)."""
+    h, w = counts.shape
+    a = np.empty((h, w), dtype=object)
+    for y in range(h):
+        for x in range(w):
+            a[y, x] = np.asarray(make(counts[y, x])).astype(dtype)
+    return a

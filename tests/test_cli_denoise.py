@@ -16,6 +16,7 @@ import pytest
 import torch
 from click.testing import CliRunner
 
+from deep_factory import openexr_deep_channel
 from ranad_cli.main import cli
 from ranad_core import cache as cache_io
 from ranad_core import denoise as denoise_mod
@@ -439,12 +440,7 @@ def test_a_mipmapped_deep_part_is_said_to_lose_its_levels(tmp_path, model_file):
     rng = np.random.default_rng(0)
     counts = rng.integers(1, 3, (h, w))
 
-    def chan(dtype, make):
-        a = np.empty((h, w), dtype=object)
-        for y in range(h):
-            for x in range(w):
-                a[y, x] = make(counts[y, x]).astype(dtype)
-        return a
+    chan = lambda dtype, make: openexr_deep_channel(counts, dtype, make)  # noqa: E731
 
     z = chan("f", lambda n: np.sort(rng.uniform(1, 10, n)))
     rgb, a = chan("e", lambda n: np.full(n, 0.3)), chan("e", lambda n: np.full(n, 0.5))

@@ -9,7 +9,8 @@ import numpy as np
 import OpenEXR
 import pytest
 
-from deep_factory import assert_same_deep, random_deep, write_bad_compression, write_corrupt_chunk
+from deep_factory import (assert_same_deep, openexr_deep_channel, random_deep, write_bad_compression,
+                          write_corrupt_chunk)
 from ranad_core.errors import RanadError
 from ranad_core.exr import fast, read_deep, read_layout, write_deep
 from ranad_core.exr.header import parse_layout
@@ -329,12 +330,7 @@ def test_uncompressed_deep_tiles_at_the_edges_written_by_openexr(tmp_path, tile)
     rng = np.random.default_rng(0)
     counts = rng.integers(0, 4, (h, w))
 
-    def chan(dtype, make):
-        a = np.empty((h, w), dtype=object)
-        for y in range(h):
-            for x in range(w):
-                a[y, x] = make(counts[y, x]).astype(dtype)
-        return a
+    chan = lambda dtype, make: openexr_deep_channel(counts, dtype, make)  # noqa: E731
 
     z = chan("f", lambda n: np.sort(rng.uniform(1, 10, n)))
     r, a = chan("e", lambda n: rng.uniform(0, 1, n)), chan("e", lambda n: rng.uniform(0, 1, n))
