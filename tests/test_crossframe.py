@@ -202,13 +202,18 @@ def test_gradients_reach_the_temporal_modules():
         assert g is not None and g.abs().max() > 0, name
 
 
-def test_denoise_with_a_window_caches_every_frame(tmp_path):
+def cross_model_file(cross, path, **metadata) -> Path:
+    """`cross` saved as a model file `ranad denoise --model` reads (its config, and `metadata` beside it)."""
     from safetensors.torch import save_file
 
+    save_file({k: v.contiguous() for k, v in cross.state_dict().items()}, str(path),
+              metadata={"model_config": json.dumps(cross.config.to_dict()), **metadata})
+    return path
+
+
+def test_denoise_with_a_window_caches_every_frame(tmp_path):
     _, cross = small_models()
-    model = tmp_path / "xf.safetensors"
-    save_file({k: v.contiguous() for k, v in cross.state_dict().items()}, str(model),
-              metadata={"model_config": json.dumps(cross.config.to_dict())})
+    model = cross_model_file(cross, tmp_path / "xf.safetensors")
     r = CliRunner().invoke(cli, ["denoise", str(SHOT / "noisy_spp16.####.exr"), "-o", str(tmp_path / "d.####.exr"),
                                  "--model", str(model), "--cache", str(tmp_path / "c")])
     assert r.exit_code == 0, r.output
@@ -226,14 +231,10 @@ def test_denoise_with_a_window_caches_every_frame(tmp_path):
 def test_a_neighbour_without_the_centres_channels_is_named(tmp_path):
     """The centre frame's channel map reads every frame of its window: a neighbour without the diffuse/specular
     split was a KeyError (internal error, exit 1); now a one-line error naming that frame, nothing written."""
-    from safetensors.torch import save_file
-
     from ranad_core.exr import read_deep, write_deep
 
     _, cross = small_models()
-    model = tmp_path / "xf.safetensors"
-    save_file({k: v.contiguous() for k, v in cross.state_dict().items()}, str(model),
-              metadata={"model_config": json.dumps(cross.config.to_dict())})
+    model = cross_model_file(cross, tmp_path / "xf.safetensors")
     shot = tmp_path / "shot"
     shot.mkdir()
     for n in range(3):
@@ -251,14 +252,10 @@ def test_a_centre_frame_without_motion_reads_its_neighbours(tmp_path):
     """Frames 0 and 2 carry motion, frame 1 not: the map detected on frame 1 had no motion, so its window ran
     unaligned and the run warned that no motion channels were mapped. The neighbours' motion now carries them
     (one direction is enough), without that warning."""
-    from safetensors.torch import save_file
-
     from ranad_core.exr import read_deep, write_deep
 
     _, cross = small_models()
-    model = tmp_path / "xf.safetensors"
-    save_file({k: v.contiguous() for k, v in cross.state_dict().items()}, str(model),
-              metadata={"model_config": json.dumps(cross.config.to_dict())})
+    model = cross_model_file(cross, tmp_path / "xf.safetensors")
     shot = tmp_path / "shot"
     shot.mkdir()
     for n in range(3):
@@ -275,8 +272,6 @@ def test_a_centre_frame_without_motion_reads_its_neighbours(tmp_path):
 def test_default_window_is_the_training_window(tmp_path):
     """Without --window a cross-frame model runs with the window its train_config records (offsets it never
     saw in training stay unused); files without that record get 3."""
-    from safetensors.torch import save_file
-
     from ranad_core.model.store import LoadedModel, training_window
 
     _, cross = small_models()
@@ -286,9 +281,7 @@ def test_default_window_is_the_training_window(tmp_path):
     assert training_window(meta(json.dumps({}))) == 3
     assert training_window(LoadedModel(cross, "m", {})) == 3
     assert training_window(meta("not json")) == 3
-    model = tmp_path / "xf1.safetensors"
-    save_file({k: v.contiguous() for k, v in cross.state_dict().items()}, str(model),
-              metadata={"model_config": json.dumps(cross.config.to_dict()), "train_config": json.dumps({"window": 1})})
+    model = cross_model_file(cross, tmp_path / "xf1.safetensors", train_config=json.dumps({"window": 1}))
     r = CliRunner().invoke(cli, ["denoise", str(SHOT / "noisy_spp16.####.exr"), "-o", str(tmp_path / "d.####.exr"),
                                  "--model", str(model), "--cache", str(tmp_path / "c")])
     assert r.exit_code == 0, r.output

@@ -183,18 +183,24 @@ def test_real_stereo_file_keeps_both_eyes(tmp_path, tiny, monkeypatch):
                                       (read_deep(src, part=i).channel("R") + 0.5).astype(np.float16))
 
 
+def garble_offsets(src: Path, part: int) -> None:
+    """Every entry of part `part`'s chunk offset table in file `src` pointed far past the file's end."""
+    from ranad_core.exr.header import offset_table_span, parse_layout
+
+    data = bytearray(src.read_bytes())
+    pos, count, _ = offset_table_span(parse_layout(bytes(data), str(src)), part, str(src))
+    data[pos:pos + 8 * count] = np.full(count, 1 << 62, "<u8").tobytes()
+    src.write_bytes(bytes(data))
+
+
 def test_a_corrupt_part_that_is_copied_fails_before_the_work(tmp_path, tiny, monkeypatch):
     """The parts a run copies as they are (here the flat 'matte') are checked before any denoising: a garbage
     offset table there used to surface only at the write, after every eye was denoised."""
     from ranad_core import shot
-    from ranad_core.exr.header import offset_table_span, parse_layout
 
     src = tmp_path / "stereo.exr"
     write_stereo(src)
-    data = bytearray(src.read_bytes())
-    pos, count, _ = offset_table_span(parse_layout(bytes(data), str(src)), 1, str(src))
-    data[pos:pos + 8 * count] = np.full(count, 1 << 62, "<u8").tobytes()
-    src.write_bytes(bytes(data))
+    garble_offsets(src, 1)
     calls = []
     real = shot._denoise_part
     monkeypatch.setattr(shot, "_denoise_part", lambda *a, **k: calls.append(1) or real(*a, **k))
@@ -205,14 +211,9 @@ def test_a_corrupt_part_that_is_copied_fails_before_the_work(tmp_path, tiny, mon
 
 def test_a_corrupt_part_that_is_denoised_is_named(tmp_path, tiny):
     """A read error in one deep part of a multi-part file names that part (the file's others may be fine)."""
-    from ranad_core.exr.header import offset_table_span, parse_layout
-
     src = tmp_path / "stereo.exr"
     write_stereo(src)
-    data = bytearray(src.read_bytes())
-    pos, count, _ = offset_table_span(parse_layout(bytes(data), str(src)), 2, str(src))
-    data[pos:pos + 8 * count] = np.full(count, 1 << 62, "<u8").tobytes()
-    src.write_bytes(bytes(data))
+    garble_offsets(src, 2)
     r = run("denoise", src, "-o", tmp_path / "out.exr", "--model", tiny)
     assert r.exit_code == 2 and "part 2 'right': truncated file" in r.output, r.output
     assert not (tmp_path / "out.exr").exists()
