@@ -12,9 +12,7 @@ from ranad_core import metrics
 from ranad_core.channels import ALPHA, RGB
 from ranad_core.denoise import denoise_window
 from ranad_core.evaluate import scene_family
-from ranad_core.exr import read_deep
-from ranad_core.model.store import load_model
-from ranad_core.train.data import find_pairs
+from edit_frames import deepz_frames, model_from_argv
 
 
 def with_from(img, ref, names):
@@ -26,13 +24,9 @@ def with_from(img, ref, names):
 
 
 root = sys.argv[1]
-model = load_model(sys.argv[2] if len(sys.argv) > 2 else "cpu-small-pdl-gza-v7").model
+model = model_from_argv()
 acc = defaultdict(list)
-for pair in find_pairs(root):
-    if pair.kind != "deepz" or pair.spp not in (4, 16, 64):
-        continue
-    noisy, ref = read_deep(pair.noisy), read_deep(pair.reference)
-    z = metrics.split_depth(ref)
+for pair, noisy, ref, z in deepz_frames(root):
     ce_ref = metrics.composite_edit(ref, z)
     row = []
     for out in (noisy, denoise_window(model, [noisy], 0).image):

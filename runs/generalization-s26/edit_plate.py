@@ -15,10 +15,8 @@ from ranad_core import metrics
 from ranad_core.baselines import oidn_flat, recolour
 from ranad_core.denoise import denoise_window
 from ranad_core.evaluate import scene_family
-from ranad_core.exr import read_deep
 from ranad_core.model.prior import LUMA
-from ranad_core.model.store import load_model
-from ranad_core.train.data import find_pairs
+from edit_frames import deepz_frames, model_from_argv
 
 
 def edit_with(img, z, colour):
@@ -32,14 +30,10 @@ def edit_with(img, z, colour):
 
 
 root = sys.argv[1]
-model = load_model(sys.argv[2] if len(sys.argv) > 2 else "cpu-small-pdl-gza-v7").model
+model = model_from_argv()
 fixed = np.asarray(metrics.INSERT_COLOUR)
 acc = defaultdict(list)
-for pair in find_pairs(root):
-    if pair.kind != "deepz" or pair.spp not in (4, 16, 64):
-        continue
-    noisy, ref = read_deep(pair.noisy), read_deep(pair.reference)
-    z = metrics.split_depth(ref)
+for pair, noisy, ref, z in deepz_frames(root):
     lum = float((metrics.flat_rgb(ref) @ LUMA).mean())
     plate = fixed * metrics.INSERT_ALPHA * lum / float(fixed @ LUMA)   # premultiplied, unpremultiplied luminance lum
     outs = [noisy, recolour(noisy, oidn_flat(noisy)), denoise_window(model, [noisy], 0).image]

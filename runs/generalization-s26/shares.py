@@ -4,7 +4,6 @@ depth) against the reference's of: ranad's output; OIDN-then-recolour (OIDN's fl
 shares); ranad's flat split by the noisy shares (`recolour(noisy, ranad flat)`); OIDN's flat split by ranad's
 shares (`recolour(ranad, OIDN flat)`). Means per family (scene manifest) and spp.
 Usage: python shares.py SET [MODEL]"""
-import os
 import sys
 from collections import defaultdict
 
@@ -14,19 +13,13 @@ from ranad_core import metrics
 from ranad_core.baselines import oidn_flat, recolour
 from ranad_core.denoise import denoise_window
 from ranad_core.evaluate import scene_family
-from ranad_core.exr import read_deep
-from ranad_core.model.store import load_model
-from ranad_core.train.data import find_pairs
+from edit_frames import deepz_frames, model_from_argv
 
 root = sys.argv[1]
-model = load_model(sys.argv[2] if len(sys.argv) > 2 else "cpu-small-pdl-gza-v7").model
+model = model_from_argv()
 METHODS = ("ranad", "oidn+noisy shares", "ranad flat+noisy shares", "oidn flat+ranad shares")
 acc = defaultdict(list)
-for pair in find_pairs(root):
-    if pair.kind != "deepz" or pair.spp not in (4, 16, 64):
-        continue
-    noisy, ref = read_deep(pair.noisy), read_deep(pair.reference)
-    z = metrics.split_depth(ref)
+for pair, noisy, ref, z in deepz_frames(root):
     out = denoise_window(model, [noisy], 0).image
     oidn = oidn_flat(noisy)
     outs = (out, recolour(noisy, oidn), recolour(noisy, metrics.flat_rgb(out)), recolour(out, oidn))
