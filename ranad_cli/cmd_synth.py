@@ -10,6 +10,7 @@ from tqdm import tqdm
 from ranad_core.errors import RanadError
 from ranad_core.synth.pixel_filter import FILTERS
 from ranad_core.synth.scene import FAMILIES
+from ranad_core.synth.trace import SAMPLERS
 
 from .params import FiniteFloat, int_list as _int_list
 from .params import width_range
@@ -46,9 +47,11 @@ from .params import width_range
               help="Deep-Z binning: a pixel's samples start a new bin where consecutive depths differ by more than "
                    "this share (plus 1 cm at the default). Small values split surfaces into many thin bins, as "
                    "renderers that merge less do (held-out data for `ranad denoise --bin-merge`).")
-@click.option("--sampler", type=click.Choice(["independent", "stratified"]), default="independent", show_default=True,
-              help="Noisy frames' pixel and lens samples: independent, or jittered in n x n strata per pixel (n^2 <= "
-                   "spp) as production renderers' samplers do (far less noisy coverage and defocus).")
+@click.option("--sampler", type=click.Choice(SAMPLERS), default="independent", show_default=True,
+              help="Noisy frames' samples: independent; stratified (pixel and lens positions jittered in n x n "
+                   "strata per pixel, n^2 <= spp: far less noisy coverage and defocus); or sobol (every dimension, "
+                   "light and BSDF choices too, from scrambled Sobol sequences, as production renderers' "
+                   "low-discrepancy samplers draw them: less and more even noise).")
 @click.option("--guides", type=click.Choice(["first-hit", "through-specular"]), default="first-hit",
               show_default=True,
               help="Albedo/normal guides: the first surface's own, or (through-specular) those of the first surface "

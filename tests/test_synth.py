@@ -519,7 +519,7 @@ def test_stratified_sampler_puts_one_sample_in_each_stratum(spp):
     from ranad_core.synth.render import trace_all
 
     fs = load_frame(make_scene(4, "easy", 8, 1), 0)
-    s = trace_all(fs, spp, 1, stratified=True)
+    s = trace_all(fs, spp, 1, sampler="stratified")
     n = int(np.sqrt(spp))
     sx, sy = s["sx"].reshape(64, spp), s["sy"].reshape(64, spp)
     assert ((sx >= 0) & (sx < 1) & (sy >= 0) & (sy < 1)).all()
@@ -625,3 +625,29 @@ def test_the_default_model_denoises_a_gaussian_filtered_frame(tmp_path):
     out = denoise_window(load_model(None).model, [noisy], 0).image
     assert smape(flat_rgb(ref), flat_rgb(out)) < 0.8 * smape(flat_rgb(ref), flat_rgb(noisy))
     assert bin_smape(ref, out) < 0.8 * bin_smape(ref, noisy)
+
+
+def test_sobol_sampler_draws_nets_and_lowers_the_error():
+    """`ranad synth --sampler sobol`: the traced pixel positions are the numpy draws' nets (sobol.net_points),
+    a subset of samples (`indices`) gets the draws of the whole range, and on two families the per-pixel error of
+    16 samples against a 1024-sample reference is well below independent sampling's (production renderers'
+    low-discrepancy noise; about 0.4x here)."""
+    from ranad_core.synth import sobol
+    from ranad_core.synth.render import trace_all
+    from ranad_core.synth.trace import trace
+
+    fs = load_frame(make_scene(4, "easy", 16, 1), 0)
+    s = trace_all(fs, 16, 1, sampler="sobol")
+    for px in (0, 9, 255):
+        np.testing.assert_array_equal(np.stack([s["sx"], s["sy"]], 1)[px * 16:(px + 1) * 16],
+                                      sobol.net_points(px, 1, 0, 16).astype(np.float32))
+    pick = np.arange(5, 4096, 9)
+    sub = trace(fs, 16, 1, 0, 0, sampler="sobol", indices=pick)
+    np.testing.assert_array_equal(sub["diffuse"], s["diffuse"][pick])
+    for seed, preset in ((4, "easy"), (5, "medium")):
+        fs = load_frame(make_scene(seed, preset, 16, 1), 0)
+        radiance = lambda t, n: (t["diffuse"] + t["specular"] + t["emission"]).reshape(256, n, 3).mean(1)  # noqa
+        ref = radiance(trace_all(fs, 1024, 99), 1024)
+        err = {smp: np.mean([((radiance(trace_all(fs, 16, k, sampler=smp), 16) - ref) ** 2).mean()
+                             for k in range(3)]) for smp in ("independent", "sobol")}
+        assert err["sobol"] < 0.7 * err["independent"], (preset, err)

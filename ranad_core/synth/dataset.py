@@ -41,7 +41,7 @@ class SynthConfig:
     ref_frames: str = "centre"        # "centre", or "all" (references for every frame: temporal evaluation)
     motion: float = 1.0               # per-frame motion scale (scene.make_scene): 0.5 = twice the frame rate
     bin_gap: float = Z_GAP_REL        # deep-Z split rule's relative depth gap (binning.layout_from_samples)
-    sampler: str = "independent"      # noisy frames' pixel and lens samples: "independent" or "stratified" (trace)
+    sampler: str = "independent"      # noisy frames' samples: "independent", "stratified" or "sobol" (trace)
     guides: str = "first-hit"         # albedo/normal of the first surface, or "through-specular" (trace)
     pixel_filter: str = "box"         # "box" (a sample in its own pixel) or "gaussian" (pixel_filter.py)
     filter_width: tuple = (2.0, 2.0)  # the Gaussian's width in pixels, or the range each scene draws it from
@@ -103,7 +103,7 @@ def make_one(cfg: SynthConfig, index: int) -> dict:
         fs = load_frame(spec, frame)
         layouts = []  # (kind, spp, layout): the frame's reference is traced once and binned into each
         for spp in cfg.spp:
-            samples = noisy_samples(spec, frame, spp, sseed + 7919 * frame + spp, fs, cfg.sampler == "stratified",
+            samples = noisy_samples(spec, frame, spp, sseed + 7919 * frame + spp, fs, cfg.sampler,
                                     cfg.guides == "through-specular", film)
             for kind_name in cfg.kinds:
                 img, lay = bin_noisy(spec, samples, spp, KINDS[kind_name], cfg.bin_gap)

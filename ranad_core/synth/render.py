@@ -66,9 +66,9 @@ def add_motion(spec: SceneSpec, frame: int, s: dict) -> None:
         s[name] = mv
 
 
-def trace_all(fs, spp: int, seed: int, stratified: bool = False, through_specular: bool = False) -> dict:
+def trace_all(fs, spp: int, seed: int, sampler: str = "independent", through_specular: bool = False) -> dict:
     n = fs.spec.width * fs.spec.height * spp
-    parts = [trace_range(fs, spp, seed, start, min(CHUNK, n - start), stratified=stratified,
+    parts = [trace_range(fs, spp, seed, start, min(CHUNK, n - start), sampler=sampler,
                          through_specular=through_specular) for start in range(0, n, CHUNK)]
     return {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
 
@@ -116,11 +116,11 @@ def deep_image(spec: SceneSpec, lay: BinLayout, vals: dict, with_motion: bool) -
                      display_window=(0, 0, spec.width - 1, spec.height - 1), channel_types=types)
 
 
-def noisy_samples(spec: SceneSpec, frame: int, spp: int, seed: int, fs=None, stratified: bool = False,
+def noisy_samples(spec: SceneSpec, frame: int, spp: int, seed: int, fs=None, sampler: str = "independent",
                   through_specular: bool = False, pixel_filter: tuple = ("box", 1.0)) -> dict:
     """One noisy frame's samples with their motion vectors (binned by bin_noisy, once per deep kind), splatted
     by `pixel_filter` (name, width in pixels; pixel_filter.py)."""
-    s = trace_all(fs or load_frame(spec, frame), spp, seed, stratified, through_specular)
+    s = trace_all(fs or load_frame(spec, frame), spp, seed, sampler, through_specular)
     add_motion(spec, frame, s)
     return splat(s, spec.width, spec.height, *pixel_filter)
 

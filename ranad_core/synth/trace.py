@@ -38,11 +38,16 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from . import sobol
 from .mitsuba_env import mitsuba
 from .scene import CUTOUT_FENCE, CUTOUT_LEAF, SceneSpec, camera_at, convert_transforms, mitsuba_dict
 
 MAX_PASS_THROUGH = 16   # surfaces a sample may pass through before it is stopped at the next one
 MAX_GROUPS = 3          # light groups the loop carries
+SAMPLERS = ("independent", "stratified", "sobol")   # noisy frames' samplers (trace)
+# the Sobol sampler's dimension pairs of one loop iteration, by draw (one pair each; media's free flights after)
+SLOT_PASS, SLOT_PICK, SLOT_LIGHT, SLOT_LOBE, SLOT_BSDF, SLOT_VOL_PICK, SLOT_VOL_LIGHT, SLOT_VOL_DIR = range(8)
+SLOTS = 8
 TIME_SLOTS = 8          # motion blur: instants the shutter interval is sampled at (one Mitsuba scene each)
 
 
@@ -137,16 +142,18 @@ REFERENCE_FIELDS = ("diffuse", "specular", "emission", "groups", "hit", "obj", "
 
 
 def trace(fs: FrameScene, spp: int, seed: int, start: int, count: int, max_depth: int = 4,
-          fields: tuple | None = None, stratified: bool = False, through_specular: bool = False,
+          fields: tuple | None = None, sampler: str = "independent", through_specular: bool = False,
           indices: np.ndarray | None = None, chunk: int | None = None) -> dict:
     """Samples start..start+count-1 of the frame (sample i belongs to pixel i // spp), or the samples `indices` of
     that range, as numpy arrays, with the random numbers they get in the whole range, or with `chunk`, in the
     calls of `chunk` samples from `start` that cover it (one call then does the work of many, as before).
 
     fields: the outputs to return besides pixel/sx/sy (default: all); references need only REFERENCE_FIELDS.
-    stratified: the pixel and lens positions jittered in a pixel's n x n strata (n = floor(sqrt(spp)), the lens
-    strata in another order than the pixel's), as production renderers' stratified and low-discrepancy samplers
-    make coverage and defocus far less noisy than independent samples do; the rest stays independent.
+    sampler: "independent" (PCG32 numbers); "stratified": the pixel and lens positions jittered in a pixel's n x n
+    strata (n = floor(sqrt(spp)), the lens strata in another order than the pixel's), as production renderers'
+    stratified and low-discrepancy samplers make coverage and defocus far less noisy than independent samples do,
+    the rest independent; "sobol": every dimension, the light and BSDF choices of each bounce too, from shuffled,
+    Owen-scrambled Sobol pairs per pixel (sobol.py), as production renderers' low-discrepancy samplers draw them.
     through_specular: albedo and normal where a path starting at a smooth (delta) surface first reaches a surface
     with a non-delta lobe, the albedo times the delta bounces' throughput (what OIDN asks of its guides, and what
     renderers' denoising AOVs write for glass and mirrors); default: the first surface's own (a glass's is flat).
@@ -177,8 +184,18 @@ def trace(fs: FrameScene, spp: int, seed: int, start: int, count: int, max_depth
     pix = idx // dr.opaque(mi.UInt32, spp)
     sx, sy = rng.next_float32(), rng.next_float32()
     lx, ly = rng.next_float32(), rng.next_float32()
+    if sampler not in SAMPLERS:
+        raise ValueError(f"unknown sampler {sampler!r} (one of {', '.join(SAMPLERS)})")
+    sob = None
+    if sampler == "sobol":
+        j = idx % dr.opaque(mi.UInt32, spp)
+        mask = dr.opaque(mi.UInt32, sobol.index_mask(spp))
+        pseed = sobol.pixel_seed(pix, seed)
+        sob = (j, pseed, mask)
+        pair = lambda p: sobol.draw_pair(j, pseed, mi.UInt32(p), mask, dr.select, mi.UInt32(0))  # noqa: E731
+        (sx, sy), (lx, ly) = [[sobol.to_unit(v, mi.Float) for v in pair(p)] for p in (0, 1)]
     n = int(math.isqrt(spp))
-    if stratified and n > 1:
+    if sampler == "stratified" and n > 1:
         j = idx % dr.opaque(mi.UInt32, spp)
         inside = j < n * n                  # samples beyond the n x n strata stay independent
         jl = (j * 7 + 3) % (n * n)          # the lens visits the strata in another order (7 is prime to n * n
@@ -195,7 +212,7 @@ def trace(fs: FrameScene, spp: int, seed: int, start: int, count: int, max_depth
               mi.Int32(fs.group_of_emitter))
     out = _loop(mi, dr, fs.mi_scene, mi.EmitterPtr(fs.emitters), len(fs.emitters), ray, rng, tables,
                 mi.Point3f(*map(float, fs.cam_origin)), mi.Vector3f(*map(float, fs.cam_forward)), max_depth,
-                through_specular, spec.media)
+                through_specular, spec.media, sob)
     dr.eval(out)
     res = {"pixel": np.asarray(pix, dtype=np.int64), "sx": np.asarray(sx), "sy": np.asarray(sy)}
     want = set(fields or out)
@@ -255,7 +272,10 @@ def _transmittance(mi, dr, media, o, d, length):
 
 
 def _loop(mi, dr, scene, emitters, n_emitters, ray, rng, tables, cam_o, cam_f, max_depth, through=False,
-          media=()):
+          media=(), sob=None):
+    """The path loop. Its random numbers come from Draws (sobol.py): the PCG32 stream `rng` in call order, or with
+    `sob` = (index in the pixel, pixel seed, mask) Sobol pairs by slot (SLOT_*; media draws after them), a
+    counter in the loop state numbering the iterations."""
     obj_t, opac_t, cut_t, grp_t = tables
     n = dr.width(ray.o)
     black = mi.Color3f(0.0)
@@ -274,13 +294,22 @@ def _loop(mi, dr, scene, emitters, n_emitters, ray, rng, tables, cam_o, cam_f, m
         normal=mi.Vector3f(0.0), position=mi.Point3f(0.0), rng=rng,
         gopen=mi.Bool(False), gbeta=mi.Color3f(1.0),   # through-specular guides: still looking, and the throughput
         volume=mi.Bool(False), zin=mi.Float(0.0), zout=mi.Float(0.0))
+    pairs = SLOTS + len(media)
+    if sob is not None:
+        state["sob_it"] = mi.UInt32(0)
+
+    def draws(st):
+        if sob is None:
+            return sobol.Draws(mi, dr, st["rng"])
+        j, pseed, mask = sob
+        return sobol.Draws(mi, dr, None, (j, pseed, st["sob_it"], mask), pairs)
 
     def add_group(st, g, value, mask):
         for k in range(MAX_GROUPS):
             st[f"group{k}"] = dr.select(mask & (g == k), st[f"group{k}"] + value, st[f"group{k}"])
 
     def body(st):
-        r = st["rng"]
+        r = draws(st)
         active = st["active"]
         si = scene.ray_intersect(st["ray"], mi.RayFlags.All, st["depth"] == 0, active)
         ray_o, ray_d = st["ray"].o, st["ray"].d
@@ -289,9 +318,9 @@ def _loop(mi, dr, scene, emitters, n_emitters, ray, rng, tables, cam_o, cam_f, m
             t_end = dr.select(si.is_valid(), si.t, dr.inf)
             t_sc = mi.Float(dr.inf)
             m_id, m_alb, m_in, m_out = mi.UInt32(0), mi.Color3f(0.0), mi.Float(0.0), mi.Float(0.0)
-            for med in media:
+            for m, med in enumerate(media):
                 hit_m, t0, t1 = _medium_span(mi, dr, ray_o, ray_d, med)
-                t_m = t0 - dr.log(1.0 - r.next_float32()) / float(med.sigma_t)
+                t_m = t0 - dr.log(1.0 - r.u1(SLOTS + m)) / float(med.sigma_t)
                 here = active & hit_m & (t_m < dr.minimum(t1, t_end)) & (t_m < t_sc)
                 t_sc = dr.select(here, t_m, t_sc)
                 m_id = dr.select(here, mi.UInt32(int(med.id)), m_id)
@@ -305,7 +334,7 @@ def _loop(mi, dr, scene, emitters, n_emitters, ray, rng, tables, cam_o, cam_f, m
         cut = dr.gather(mi.UInt32, cut_t, reg, valid)
         alpha = dr.select(cut == CUTOUT_LEAF, alpha * _leaf_alpha(mi, dr, si.uv), alpha)
         alpha = dr.select(cut == CUTOUT_FENCE, alpha * _fence_alpha(mi, dr, si.uv), alpha)
-        u = r.next_float32()
+        u = r.u1(SLOT_PASS)
         passes = valid & (u >= alpha) & (st["passes"] < MAX_PASS_THROUGH)
         shade = valid & ~passes
         first_now = shade & st["first"]
@@ -350,9 +379,9 @@ def _loop(mi, dr, scene, emitters, n_emitters, ray, rng, tables, cam_o, cam_f, m
         nee = shade & mi.has_flag(bsdf.flags(), mi.BSDFFlags.Smooth)
         # (the emitter is picked here, uniformly in object-id order, rather than by scene.sample_emitter_direction,
         # whose emitter order, and so the sample drawn for a given random number, changes between loads)
-        pick = dr.minimum(mi.UInt32(r.next_float32() * n_emitters), n_emitters - 1)
+        pick = dr.minimum(mi.UInt32(r.u1(SLOT_PICK) * n_emitters), n_emitters - 1)
         emitter = dr.gather(mi.EmitterPtr, emitters, pick, nee)
-        ds, em_w = emitter.sample_direction(si, mi.Point2f(r.next_float32(), r.next_float32()), nee)
+        ds, em_w = emitter.sample_direction(si, r.u2(SLOT_LIGHT), nee)
         nee &= ds.pdf > 0
         visible = ~scene.ray_test(si.spawn_ray_to(ds.p), nee)
         em_w = dr.select(nee & visible, em_w * n_emitters, 0.0)
@@ -372,7 +401,8 @@ def _loop(mi, dr, scene, emitters, n_emitters, ray, rng, tables, cam_o, cam_f, m
         add_group(st, dr.gather(mi.Int32, grp_t, em_reg_nee, nee), n_d + n_s, nee & (em_reg_nee != 0))
 
         # continue by sampling the BSDF (the continuation split the same way at the first stop)
-        bs, w = bsdf.sample(ctx, si, r.next_float32(), mi.Point2f(r.next_float32(), r.next_float32()), shade)
+        lobe = r.u1(SLOT_LOBE)
+        bs, w = bsdf.sample(ctx, si, lobe, r.u2(SLOT_BSDF), shade)
         delta = mi.has_flag(bs.sampled_type, mi.BSDFFlags.Delta)
         ok = shade & (bs.pdf > 0)
         if through:
@@ -390,19 +420,20 @@ def _loop(mi, dr, scene, emitters, n_emitters, ray, rng, tables, cam_o, cam_f, m
         st["prev_pdf"] = dr.select(shade, bs.pdf, st["prev_pdf"])
         st["prev_delta"] = dr.select(shade, delta, st["prev_delta"])
         if media:
-            _scatter_event(st, scatter, t_sc, ray_o + ray_d * t_sc, m_id, m_alb, ray_o + ray_d * m_in,
+            _scatter_event(st, r, scatter, t_sc, ray_o + ray_d * t_sc, m_id, m_alb, ray_o + ray_d * m_in,
                            ray_o + ray_d * m_out)
         st["passes"] = dr.select(passes, st["passes"] + 1, st["passes"])
         st["depth"] = dr.select(shade | scatter, st["depth"] + 1, st["depth"])
         st["first"] = st["first"] & ~shade & ~scatter
         alive = dr.max(st["beta_d"] + st["beta_s"]) > 0
         st["active"] = (passes | ((ok | scatter) & alive)) & (st["depth"] < max_depth)
+        if sob is not None:
+            st["sob_it"] = st["sob_it"] + 1
         return st
 
-    def _scatter_event(st, scatter, t_sc, p, m_id, m_alb, p_in, p_out):
+    def _scatter_event(st, r, scatter, t_sc, p, m_id, m_alb, p_in, p_out):
         """A scatter event inside a medium: first-stop attributes (a volume sample), next-event estimation with
         the isotropic phase function and the media's transmittance, and an isotropic continuation."""
-        r = st["rng"]
         first_m = scatter & st["first"]
         st["hit"] = st["hit"] | first_m
         st["volume"] = st["volume"] | first_m
@@ -418,9 +449,9 @@ def _loop(mi, dr, scene, emitters, n_emitters, ray, rng, tables, cam_o, cam_f, m
         it = dr.zeros(mi.SurfaceInteraction3f, n)
         it.p, it.t = p, mi.Float(0.0)
         phase = 1.0 / (4.0 * math.pi)
-        pick = dr.minimum(mi.UInt32(r.next_float32() * n_emitters), n_emitters - 1)
+        pick = dr.minimum(mi.UInt32(r.u1(SLOT_VOL_PICK) * n_emitters), n_emitters - 1)
         emitter = dr.gather(mi.EmitterPtr, emitters, pick, scatter)
-        ds, em_w = emitter.sample_direction(it, mi.Point2f(r.next_float32(), r.next_float32()), scatter)
+        ds, em_w = emitter.sample_direction(it, r.u2(SLOT_VOL_LIGHT), scatter)
         nee = scatter & (ds.pdf > 0)
         visible = ~scene.ray_test(it.spawn_ray_to(ds.p), nee)
         em_w = dr.select(nee & visible, em_w * n_emitters, 0.0) * _transmittance(mi, dr, media, p, ds.d, ds.dist)
@@ -434,7 +465,7 @@ def _loop(mi, dr, scene, emitters, n_emitters, ray, rng, tables, cam_o, cam_f, m
         add_group(st, dr.gather(mi.Int32, grp_t, em_reg, nee), c_d + c_s, nee & (em_reg != 0))
         # isotropic continuation: phase / pdf = 1, so the throughput is multiplied by the albedo; at the first
         # stop all of it is diffuse
-        wo = mi.warp.square_to_uniform_sphere(mi.Point2f(r.next_float32(), r.next_float32()))
+        wo = mi.warp.square_to_uniform_sphere(r.u2(SLOT_VOL_DIR))
         st["beta_d"] = dr.select(first_m, m_alb, dr.select(scatter, st["beta_d"] * m_alb, st["beta_d"]))
         st["beta_s"] = dr.select(first_m, mi.Color3f(0.0), dr.select(scatter, st["beta_s"] * m_alb, st["beta_s"]))
         st["ray"] = dr.select(scatter, mi.Ray3f(p, wo), st["ray"])
