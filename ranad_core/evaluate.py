@@ -26,8 +26,8 @@ from .train.data import find_pairs, read_manifest
 METHODS = ("noisy", "oidn", "recolour", "ranad")
 FLAT = ("smape", "dssim", "flip")
 DEEP = ("bin_smape", "z_rel", "comp_flip", "comp_smape", "sep_smape", "sep_dssim")
-COLUMNS = ("scene", "family", "group", "exposure", "kind", "spp", "ref_spp", "method", *FLAT, "light", *DEEP,
-           "seconds")
+COLUMNS = ("scene", "family", "group", "exposure", "kind", "spp", "ref_spp", "film", "sampler", "method", *FLAT,
+           "light", *DEEP, "seconds")
 # A reference with fewer than this many times its input's samples is noisy enough to be part of every score against
 # it: at 8x, two tracings of a glass scene's reference differ by three quarters of what a 64-spp input does
 # (runs/generalization-s25, section 3).
@@ -76,6 +76,17 @@ def scene_family(pair) -> str:
     return scene_manifest(pair).get("preset", "?")
 
 
+def render_conditions(pair) -> tuple[str, str]:
+    """(film, sampler) a synth scene was rendered with, from its manifest ("box", "gaussian 2", ...; "stratified",
+    "sobol", ...; "?" without one): what flat OIDN's figures depend on (see film_note)."""
+    m = scene_manifest(pair)
+    if not m:
+        return "?", "?"
+    f = m.get("pixel_filter")
+    film = f"{f[0]} {float(f[1]):g}" if isinstance(f, list) and len(f) == 2 else "box"
+    return film, str(m.get("sampler", "independent"))
+
+
 def reference_spp(pair) -> int:
     """Samples per pixel of a pair's reference, from its scene's manifest (0: not recorded)."""
     v = scene_manifest(pair).get("ref_spp", 0)
@@ -108,6 +119,7 @@ def evaluate(dataset: str, model, spps=None, kinds=None, max_scenes: int | None 
     result = Result()
     for pair, stops in ((p, e) for p in pairs for e in exposures):
         family, ref_spp = scene_family(pair), reference_spp(pair)
+        film, sampler = render_conditions(pair)
         group = "held-out" if family in held_out else "in-family"
         noisy, ref = exposed(read_deep(pair.noisy), stops), read_deep(pair.reference)
         z = metrics.split_depth(ref)
@@ -132,7 +144,7 @@ def evaluate(dataset: str, model, spps=None, kinds=None, max_scenes: int | None 
             deep = not isinstance(out, np.ndarray)
             flats[method] = metrics.flat_rgb(out) if deep else out
             row = {"scene": pair.scene, "family": family, "group": group, "exposure": stops, "kind": pair.kind,
-                   "spp": pair.spp, "ref_spp": ref_spp, "method": method,
+                   "spp": pair.spp, "ref_spp": ref_spp, "film": film, "sampler": sampler, "method": method,
                    **metrics.flat_scores(flat_ref, flats[method]), "light": metrics.light(flat_ref, flats[method]),
                    **(metrics.deep_scores(ref, out, z) if deep else dict.fromkeys(DEEP, math.nan)),
                    "seconds": seconds[method]}
@@ -184,6 +196,7 @@ def markdown(rows: list, title: str = "") -> str:
     lines = ([f"### {title}", ""] if title else []) + ["| " + " | ".join(cols) + " |",
                                                       "|" + "---|" * len(cols)]
     lines += ["| " + " | ".join(_fmt(r[c]) for c in cols) + " |" for r in s]
+    lines += reference_note(rows) + film_note(rows)
     return "\n".join(lines) + "\n"
 
 
@@ -255,7 +268,7 @@ def grouped_markdown(rows: list, title: str = "") -> str:
         parts += ["", "### per family (means over kinds and exposures; oidn_vs_noisy: flat OIDN's FLIP / the noisy "
                   "input's)", "", "| " + " | ".join(cols) + " |", "|" + "---|" * len(cols)]
         parts += ["| " + " | ".join(_fmt(r[c]) for c in cols) + " |" for r in fr]
-    parts += reference_note(rows)
+    parts += reference_note(rows) + film_note(rows)
     return "\n".join(parts) + "\n"
 
 
@@ -269,6 +282,19 @@ def reference_note(rows: list) -> list:
     which = ", ".join(f"{spp} spp against {ref} ({ref / spp:.3g}x)" for spp, ref in thin)
     return ["", f"Reference noise: the references hold fewer than {REF_SPP_RATIO}x their inputs' samples at "
             f"{which}; the references' own noise is part of every method's score there."]
+
+
+def film_note(rows: list) -> list:
+    """Markdown lines naming the pixel filters other than box among the rows' frames: a wide film filter spreads
+    each sample over neighbouring pixels, so their noise is correlated, which flat OIDN (trained on noise
+    uncorrelated between pixels) leaves largely in place as if it were detail; ratios against OIDN and the
+    recolour baseline on such frames flatter the deep denoiser (runs/generalization-s27, section 4)."""
+    wide = sorted({r["film"] for r in rows if r.get("film", "box") not in ("box", "?")})
+    if not wide:
+        return []
+    return ["", f"Film: frames filtered through {', '.join(wide)}: their noise is correlated between pixels, which "
+            "flat OIDN leaves largely in place; ratios against OIDN and OIDN-then-recolour there flatter ranad "
+            "(score box-filtered frames too)."]
 
 
 def write_csv(rows: list, path: str, columns=COLUMNS) -> None:

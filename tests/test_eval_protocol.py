@@ -74,3 +74,28 @@ def test_reference_note_names_the_sample_counts_whose_references_are_thin():
     assert reference_note([{**r, "ref_spp": REF_SPP_RATIO * 16} for r in _rows()]) == []
     assert reference_note(_rows()) == []                                        # no count recorded
     assert "Reference noise" not in grouped_markdown(_rows(), "t")
+
+
+def test_film_note_flags_frames_whose_noise_flat_oidn_keeps(tmp_path):
+    """eval.md says when frames went through a wide pixel filter (their noise correlated between pixels, which flat
+    OIDN leaves in place, so ratios against it flatter ranad); box-filtered frames and sets without a manifest get
+    no note. The film and sampler come from the scene's manifest (box and independent where it names none)."""
+    import json
+    from types import SimpleNamespace
+
+    from ranad_core.evaluate import film_note, render_conditions
+
+    box = [{**r, "film": "box"} for r in _rows()]
+    wide = box + [{**r, "film": "gaussian 2"} for r in _rows()]
+    note = "\n".join(film_note(wide))
+    assert "gaussian 2" in note and "box" not in note.split("through")[1].split(":")[0]
+    assert note in grouped_markdown(wide, "t")
+    assert film_note(box) == [] and film_note([{**r, "film": "?"} for r in _rows()]) == [] and film_note(_rows()) == []
+    scene = tmp_path / "scene_0000"
+    (scene / "deepz").mkdir(parents=True)
+    pair = SimpleNamespace(noisy=scene / "deepz" / "noisy_spp4.0000.exr")
+    assert render_conditions(pair) == ("?", "?")
+    (scene / "manifest.json").write_text(json.dumps({"preset": "glass"}))
+    assert render_conditions(pair) == ("box", "independent")
+    (scene / "manifest.json").write_text(json.dumps({"pixel_filter": ["gaussian", 2.0], "sampler": "sobol"}))
+    assert render_conditions(pair) == ("gaussian 2", "sobol")
