@@ -52,3 +52,13 @@ def test_pixels_and_pairs_are_decorrelated():
     assert abs(np.corrcoef(first[:, 0], first[:, 1])[0, 1]) < 0.05
     assert not np.array_equal(sobol.net_points(0, 21, 2, 16), sobol.net_points(1, 21, 2, 16))
     assert not np.array_equal(sobol.net_points(0, 21, 2, 16), sobol.net_points(0, 22, 2, 16))
+
+
+def test_samples_past_the_largest_net_do_not_repeat_it():
+    """A pixel with more samples than one net holds (2^SOBOL_BITS) gets a differently scrambled net for the rest,
+    not the first samples' points again (which would trace the same paths twice)."""
+    spp = (1 << sobol.SOBOL_BITS) + 64
+    p = sobol.net_points(3, 5, 2, spp)
+    assert len(np.unique(p, axis=0)) == spp
+    np.testing.assert_array_equal(p[:64], sobol.net_points(3, 5, 2, 1 << sobol.SOBOL_BITS)[:64])
+    assert not np.isin(p[-64:, 0], p[:64, 0]).any()

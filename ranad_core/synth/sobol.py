@@ -16,7 +16,7 @@ path loop; `net_points` evaluates the same functions on numpy through a small sh
 from __future__ import annotations
 
 LK = (0x6C50B47C, 0xB82F1E52, 0xC7AFE638, 0x8D22F6E6)   # Laine-Karras permutation constants (Burley 2020)
-SOBOL_BITS = 16      # sample indices below 2^16 are Sobol-ordered; a pixel's samples beyond stay decorrelated
+SOBOL_BITS = 16      # a pixel's samples form nets of up to 2^16 points; beyond, each further 2^16 another net
 
 
 def _hash(x):
@@ -76,7 +76,8 @@ def _hash_int(seed: int) -> int:
 def draw_pair(j, pseed, pair, mask, select, zero):
     """The 32-bit fractions (x, y) of sample j (its index in the pixel) in dimension pair `pair` (an array or an
     int) of the pixel whose seed is pseed; mask = 2^m - 1 with 2^m >= the pixel's sample count."""
-    base = _hash(pseed ^ _hash(pair * 0x9E3779B9 + 0x632BE5AB))
+    # samples past the first 2^SOBOL_BITS (j's high bits) scramble another copy of the net, not repeat this one
+    base = _hash(pseed ^ _hash(pair * 0x9E3779B9 + 0x632BE5AB + (j >> SOBOL_BITS) * 0x85EBCA6B))
     i = _owen(j, _hash(base ^ 0x5BD1E995)) & mask      # a shuffle of 0 .. 2^m - 1: the low bits of j, permuted
     x, y = _sobol_pair(i, select, zero)
     return _owen(x, _hash(base ^ 0x68E31DA4)), _owen(y, _hash(base ^ 0xB5297A4D))
