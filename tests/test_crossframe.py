@@ -228,9 +228,9 @@ def test_denoise_with_a_window_caches_every_frame(tmp_path):
     assert len(json.loads(meta["window"])) == 1
 
 
-def test_a_neighbour_without_the_centres_channels_is_named(tmp_path):
-    """The centre frame's channel map reads every frame of its window: a neighbour without the diffuse/specular
-    split was a KeyError (internal error, exit 1); now a one-line error naming that frame, nothing written."""
+def shot_stripped_in_frame_1(tmp_path, prefixes: tuple) -> tuple:
+    """(a small cross-frame model file, a folder s.0000-0002.exr): the bundled shot's first three frames with frame
+    1's channels starting with `prefixes` left out (a frame that lacks what its neighbours have)."""
     from ranad_core.exr import read_deep, write_deep
 
     _, cross = small_models()
@@ -240,8 +240,15 @@ def test_a_neighbour_without_the_centres_channels_is_named(tmp_path):
     for n in range(3):
         img = read_deep(SHOT / f"noisy_spp16.{n:04d}.exr")
         if n == 1:
-            img = img.select([c for c in img.channels if not c.startswith(("diffuse.", "specular."))])
+            img = img.select([c for c in img.channels if not c.startswith(prefixes)])
         write_deep(shot / f"s.{n:04d}.exr", img)
+    return model, shot
+
+
+def test_a_neighbour_without_the_centres_channels_is_named(tmp_path):
+    """The centre frame's channel map reads every frame of its window: a neighbour without the diffuse/specular
+    split was a KeyError (internal error, exit 1); now a one-line error naming that frame, nothing written."""
+    model, shot = shot_stripped_in_frame_1(tmp_path, ("diffuse.", "specular."))
     r = CliRunner().invoke(cli, ["denoise", str(shot / "s.####.exr"), "-o", str(tmp_path / "out" / "d.####.exr"),
                                  "--model", str(model)])
     assert r.exit_code == 2 and "s.0001.exr: lacks channel(s) diffuse.R" in r.output, r.output
@@ -252,18 +259,11 @@ def test_a_centre_frame_without_motion_reads_its_neighbours(tmp_path):
     """Frames 0 and 2 carry motion, frame 1 not: the map detected on frame 1 had no motion, so its window ran
     unaligned and the run warned that no motion channels were mapped. The neighbours' motion now carries them
     (one direction is enough), without that warning."""
-    from ranad_core.exr import read_deep, write_deep
+    from ranad_core.exr import read_deep
 
-    _, cross = small_models()
-    model = cross_model_file(cross, tmp_path / "xf.safetensors")
-    shot = tmp_path / "shot"
-    shot.mkdir()
     for n in range(3):
-        img = read_deep(SHOT / f"noisy_spp16.{n:04d}.exr")
-        assert "motion_next.X" in img.channels
-        if n == 1:
-            img = img.select([c for c in img.channels if not c.startswith(("motion_prev", "motion_next"))])
-        write_deep(shot / f"s.{n:04d}.exr", img)
+        assert "motion_next.X" in read_deep(SHOT / f"noisy_spp16.{n:04d}.exr").channels
+    model, shot = shot_stripped_in_frame_1(tmp_path, ("motion_prev", "motion_next"))
     r = CliRunner().invoke(cli, ["denoise", str(shot / "s.####.exr"), "-o", str(tmp_path / "out" / "d.####.exr"),
                                  "--model", str(model)])
     assert r.exit_code == 0 and "WITHOUT motion compensation" not in r.output, r.output
