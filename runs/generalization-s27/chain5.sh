@@ -1,13 +1,9 @@
 #!/bin/bash
 # session 27: the weights half-way between v7 and t16 (as v7 is between v5 and v6), scored on the same sets
-cd /work/data
-. /work/main/.venv/bin/activate
-export NUMPY_MADVISE_HUGEPAGE=0
-R=/work/main/runs
+. "$(dirname "$0")/common.sh"
 M=s27/t16_half.safetensors
-[ -f $M ] || ranad export $R/cpu-small-pdl-gzb-t16 -o $M --interpolate cpu-small-pdl-gza-v7=0.5 > s27/export_t16_half.log 2>&1
-ev() { [ -f s27/ev_$1_$2/eval.md ] || ( time ranad eval $2 -o s27/ev_$1_$2 --model $3 \
-    --held-out glass,layers,interior,fog --grid 0 ) > s27/ev_$1_$2.log 2>&1; }
+[ -f $M ] || ranad export $R/cpu-small-pdl-gzb-t16 -o $M --interpolate cpu-small-pdl-gza-v7=0.5 \
+    > s27/export_t16_half.log 2>&1
 for s in heldout_g1int8_box heldout_g1int8_boxsob heldout_g1fog_boxsob heldout_g1sg8_boxsob heldout_g1int8 \
     heldout_g1sg8 heldout_g1w4 heldout_g1ac8 heldout_g1fog; do
     ev t16h $s $M
