@@ -35,27 +35,28 @@ from .model.layers import Layout
 MAX_VALUE_CHANNELS = 63          # the RaNA kernels' widest value head is 64 channels
 
 
-def aov_layers(channels, pattern: str) -> dict:
-    """layer name -> its (R, G, B) channel names, for the layers matching the glob `pattern`."""
+def _rgb_parts(channels, pattern: str) -> dict:
+    """layer name -> {R/G/B: channel name} of the layers matching the glob `pattern` (.r/.g/.b too: Karma's LPE
+    layers)."""
     found = {}
     for c in channels:
         if "." not in c:
             continue
         layer, comp = c.rsplit(".", 1)
-        if fnmatch.fnmatchcase(layer, pattern) and comp.upper() in RGB:   # .r/.g/.b too (Karma's LPE layers)
+        if fnmatch.fnmatchcase(layer, pattern) and comp.upper() in RGB:
             found.setdefault(layer, {})[comp.upper()] = c
-    return {k: tuple(v[x] for x in RGB) for k, v in sorted(found.items()) if len(v) == 3}
+    return found
+
+
+def aov_layers(channels, pattern: str) -> dict:
+    """layer name -> its (R, G, B) channel names, for the layers matching the glob `pattern`."""
+    return {k: tuple(v[x] for x in RGB) for k, v in sorted(_rgb_parts(channels, pattern).items()) if len(v) == 3}
 
 
 def partial_layers(channels, pattern: str) -> list:
     """Layers matching `pattern` that have some but not all of .R/.G/.B: aov_layers leaves them out (they stay
     noisy, and light groups no longer sum to the denoised beauty), which the commands say."""
-    found = {}
-    for c in channels:
-        layer, _, comp = c.rpartition(".")
-        if layer and fnmatch.fnmatchcase(layer, pattern) and comp.upper() in RGB:
-            found.setdefault(layer, set()).add(comp.upper())
-    return sorted(k for k, v in found.items() if len(v) < 3)
+    return sorted(k for k, v in _rgb_parts(channels, pattern).items() if k and len(v) < 3)
 
 
 def kernel_rule(layer: str) -> str:
