@@ -16,7 +16,9 @@ residual noise once the noise is low (runs/generalization-s24, section 4). And (
 `composite_coarse`: SMAPE between the linear composites averaged over blocks of 4 x 4 and 8 x 8 pixels, which
 charges energy a prediction loses (a firefly or caustic speckle dimmed rather than spread over its neighbours: the
 held-out glass scenes lost 4-31% of their input's energy, runs/generalization-s25) while the per-pixel terms
-cannot tell a dimmed speckle from a kept one."""
+cannot tell a dimmed speckle from a kept one. And (weight 0 by default) `flip`: HDR-FLIP of the composite
+(flip_loss.py), the perceptual difference `ranad eval` scores, which charges low-frequency blotches in smooth
+regions that the per-pixel terms hardly see (runs/generalization-s28)."""
 
 from __future__ import annotations
 
@@ -24,6 +26,7 @@ import torch
 
 from ..deep import flatten_torch
 from ..metrics import INSERT_ALPHA, INSERT_COLOUR, RECOLOUR_GAIN, ssim, tonemap
+from .flip_loss import hdr_flip
 from .weights import WEIGHTS
 
 
@@ -122,6 +125,8 @@ def total_loss(pred: dict, ref: dict, offsets: torch.Tensor, size: tuple[int, in
     grad = weights["composite_grad"] > 0 and h >= 2 and w >= 2
     if weights["composite_coarse"] > 0:
         parts["composite_coarse"] = coarse_smape(planes(cp), planes(cr))
+    if weights["flip"] > 0:
+        parts["flip"] = hdr_flip(planes(cr / scale), planes(cp / scale))
     if structure or grad:
         ip, ir = img(cp), img(cr)                              # tone-mapped once for both image terms
         if structure:
