@@ -177,6 +177,12 @@ CONFIGS["cpu-small-pdl-gall"] = ModelConfig(**{**CONFIGS["cpu-small-pdl"].__dict
 CONFIGS["cpu-small-pdl-gza-xg"] = ModelConfig(**{**CONFIGS["cpu-small-pdl-xg"].__dict__, "name": "cpu-small-pdl-gza-xg",
                                                 "layer_gate": ("depth", "alpha")})
 
+# cpu-small-pdl-gza whose diffuse reconstruction has a fourth scale (radius 5.5 on a lattice of 1 bin in 8): on
+# box-filtered held-out interiors at 4-16 spp ranad trails flat OIDN in smooth, mid-contrast regions, where three
+# scales (footprint about 10 px) leave low-frequency noise (runs/generalization-s28)
+CONFIGS["cpu-small-pdl-gza-d4"] = ModelConfig(**{**CONFIGS["cpu-small-pdl-gza"].__dict__,
+                                               "name": "cpu-small-pdl-gza-d4", "recon": _recon(diffuse={"scales": 4})})
+
 # cpu-small-pdl-gza with one U-Net: the backbone is about 40% of a frame's time and the second U-Net half of it
 # (issue 27); started from a two-U-Net model's first U-Net (train.trainer.init_single) and fine-tuned. Measured, not
 # shipped: 0.73x the time of the two-U-Net default on the 1080p bench frame, 7-16% worse on held-out sets
