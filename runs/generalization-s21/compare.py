@@ -34,9 +34,13 @@ def cells(values):
     return " / ".join(f"{v:.3f}" for v in values)
 
 
-old, new = sys.argv[1], sys.argv[2]
-for name in sys.argv[3:]:
-    a, b = ratios_by_kind(old + name), ratios_by_kind(new + name)
-    kind_gap = max(abs(x - y) for i in (0, 1) for x, y in zip(b["deepz"][i], b["deepoid"][i]))
-    print(f"| `{name}` ({'/'.join(map(str, b['deepz'][2]))} spp) | {cells(a['deepz'][0])} | {cells(a['deepz'][1])} | "
-          f"{cells(b['deepz'][0])} | {cells(b['deepz'][1])} | {kind_gap:.3f} |")
+def main(old: str, new: str, names) -> None:
+    for name in names:
+        a, b = ratios_by_kind(old + name), ratios_by_kind(new + name)
+        kind_gap = max(abs(x - y) for i in (0, 1) for x, y in zip(b["deepz"][i], b["deepoid"][i]))
+        print(f"| `{name}` ({'/'.join(map(str, b['deepz'][2]))} spp) | {cells(a['deepz'][0])} | "
+              f"{cells(a['deepz'][1])} | {cells(b['deepz'][0])} | {cells(b['deepz'][1])} | {kind_gap:.3f} |")
+
+
+if __name__ == "__main__":   # importable (runs/generalization-s28/summary.py reads ratios_by_kind)
+    main(sys.argv[1], sys.argv[2], sys.argv[3:])
