@@ -24,8 +24,8 @@ from .inputs import feature_dim
 from .ranad import RaNAD
 
 WEIGHTS_DIR = Path(__file__).resolve().parents[1] / "weights"
-DEFAULT_MODEL = "cpu-small-pdl-gza-v7"       # single frames
-DEFAULT_CROSS_MODEL = "cpu-small-pdl-gza-xg-v7"  # sequences: frames with neighbours
+DEFAULT_MODEL = "cpu-small-pdl-gza-v8"       # single frames
+DEFAULT_CROSS_MODEL = "cpu-small-pdl-gza-xg-v8"  # sequences: frames with neighbours
 
 
 def default_model(sequence: bool) -> str:
