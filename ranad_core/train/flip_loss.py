@@ -19,6 +19,7 @@ none (at zero difference), cancelled so that identical images score exactly 0. A
 
 from __future__ import annotations
 
+import functools
 import math
 
 import torch
@@ -49,7 +50,8 @@ def _aces_inverse(t: float) -> float:
 
 def exposures(ref: torch.Tensor) -> list:
     """Exposures (stops) for a [3, H, W] linear reference: from the one that maps its brightest luminance to 0.85
-    to the one that maps its median there, one per stop (at least two, at most MAX_EXPOSURES)."""
+    to the one that maps its median there, one per stop (at least two). Two guards the evaluator lacks, for training
+    crops: at most MAX_EXPOSURES, and a median of 0 (a crop mostly black) taken as 2^-20 of the brightest."""
     y = (ref[0] * 0.2126 + ref[1] * 0.7152 + ref[2] * 0.0722).detach().float()
     hi = float(y.max())
     if hi <= 0:
@@ -107,21 +109,18 @@ def _lab(rgb: torch.Tensor) -> torch.Tensor:
 
 
 def _hyab(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
+    """HyAB distance of two [B, 3, H, W] L*a*b* images: |dL| plus the Euclidean distance in (a, b) -> [B, H, W]."""
     d = a - b
     e2 = d.new_tensor(EPS * EPS)   # sqrt(0 + e2) - sqrt(e2) is exactly 0: a finite gradient, no offset
     return d[:, 0].abs() + torch.sqrt(d[:, 1] ** 2 + d[:, 2] ** 2 + e2) - torch.sqrt(e2)
 
 
-_CMAX = None
-
-
+@functools.cache
 def _cmax() -> float:
-    global _CMAX
-    if _CMAX is None:
-        green, blue = torch.tensor([0.0, 1.0, 0.0]), torch.tensor([0.0, 0.0, 1.0])
-        lab = _lab(torch.stack([green, blue])[:, :, None, None].double())
-        _CMAX = float(_hyab(lab[:1], lab[1:]).squeeze()) ** QC
-    return _CMAX
+    """The largest colour error, HyAB between Hunt-adjusted green and blue, raised to QC: the compression's scale."""
+    green, blue = torch.tensor([0.0, 1.0, 0.0]), torch.tensor([0.0, 0.0, 1.0])
+    lab = _lab(torch.stack([green, blue])[:, :, None, None].double())
+    return float(_hyab(lab[:1], lab[1:]).squeeze()) ** QC
 
 
 def ldr_flip_map(ref: torch.Tensor, test: torch.Tensor) -> torch.Tensor:
