@@ -88,7 +88,7 @@ def _spp_weight(text: str) -> tuple[int, float]:
                   "compares the tone-mapped composite's pixel-to-pixel differences (fine detail) with the "
                   "reference's; 'composite_coarse' compares the composite averaged over blocks of 4 and 8 pixels "
                   "(energy a dimmed firefly or caustic loses); 'flip' scores the composite's HDR-FLIP, the perceptual "
-                  "difference `ranad eval` reports.")
+                  "difference `ranad eval` reports, and 'edit_flip' the compositing edit's.")
 @click.option("--spp-weight", "spp_weights", multiple=True, metavar="SPP=W",
               help="Relative odds of drawing a training crop of that sample count (repeatable; counts not named "
                    "weigh 1), e.g. 64=2 to show clean renders twice as often, where the model over-smooths them.")

@@ -829,3 +829,4 @@ def test_flip_term_is_zero_for_the_reference_and_reaches_the_prediction():
     assert hdr_flip(t, torch.from_numpy(noisy).permute(2, 0, 1)).item() > 0.05
 
     _check_optional_term("flip", lambda d: d * 0.5)
+    _check_optional_term("edit_flip", lambda d: d * 0.5)   # the same HDR-FLIP on the compositing edit's image

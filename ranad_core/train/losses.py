@@ -18,7 +18,8 @@ charges energy a prediction loses (a firefly or caustic speckle dimmed rather th
 held-out glass scenes lost 4-31% of their input's energy, runs/generalization-s25) while the per-pixel terms
 cannot tell a dimmed speckle from a kept one. And (weight 0 by default) `flip`: HDR-FLIP of the composite
 (flip_loss.py), the perceptual difference `ranad eval` scores, which charges low-frequency blotches in smooth
-regions that the per-pixel terms hardly see (runs/generalization-s28)."""
+regions that the per-pixel terms hardly see (runs/generalization-s28); `edit_flip` the same on the compositing
+edit's image, the figure the issue's edit targets are set in."""
 
 from __future__ import annotations
 
@@ -106,20 +107,22 @@ def total_loss(pred: dict, ref: dict, offsets: torch.Tensor, size: tuple[int, in
     img = lambda x: shaped(x / scale)  # noqa: E731
     structure = h >= 4 and w >= 4                             # SSIM needs its window
     wants = {k: weights[k] > 0 and (structure or not k.endswith("ssim"))
-             for k in ("separation", "separation_ssim", "edit", "edit_ssim")}
+             for k in ("separation", "separation_ssim", "edit", "edit_ssim", "edit_flip")}
     if any(wants.values()):
         slices = depth_slices(pred, ref, offsets)
         if wants["separation"]:
             parts["separation"] = separation(slices)
         if wants["separation_ssim"]:
             parts["separation_ssim"] = sum(1 - ssim(img(p[:, :3]), img(r[:, :3])) for p, r in slices) / len(slices)
-        if wants["edit"] or wants["edit_ssim"]:
+        if wants["edit"] or wants["edit_ssim"] or wants["edit_flip"]:
             (fp, fr), (bp, br) = slices
             ep, er = edit_image(fp, bp, scale), edit_image(fr, br, scale)
             if wants["edit"]:
                 parts["edit"] = smape(ep, er)
             if wants["edit_ssim"]:
                 parts["edit_ssim"] = 1 - ssim(shaped(ep), shaped(er))   # edit_image divided by scale already
+            if wants["edit_flip"]:
+                parts["edit_flip"] = hdr_flip(planes(er), planes(ep))
     cp, cr = composite(pred, offsets), composite(ref, offsets)
     parts["composite"] = smape(cp, cr)
     grad = weights["composite_grad"] > 0 and h >= 2 and w >= 2
