@@ -71,15 +71,14 @@ def scene_manifest(pair) -> dict:
     return m if isinstance(m, dict) else {}
 
 
-def scene_family(pair) -> str:
-    """The scene family (synth preset) of a pair, from its scene's manifest."""
-    return scene_manifest(pair).get("preset", "?")
+def scene_family(m: dict) -> str:
+    """The scene family (synth preset), from a scene's manifest (scene_manifest)."""
+    return m.get("preset", "?")
 
 
-def render_conditions(pair) -> tuple[str, str]:
-    """(film, sampler) a synth scene was rendered with, from its manifest ("box", "gaussian 2", ...; "stratified",
-    "sobol", ...; "?" without one): what flat OIDN's figures depend on (see film_note)."""
-    m = scene_manifest(pair)
+def render_conditions(m: dict) -> tuple[str, str]:
+    """(film, sampler) a synth scene was rendered with, from its manifest (scene_manifest; "box", "gaussian 2", ...;
+    "stratified", "sobol", ...; "?" without one): what flat OIDN's figures depend on (see film_note)."""
     if not m:
         return "?", "?"
     f = m.get("pixel_filter")
@@ -87,9 +86,9 @@ def render_conditions(pair) -> tuple[str, str]:
     return film, str(m.get("sampler", "independent"))
 
 
-def reference_spp(pair) -> int:
-    """Samples per pixel of a pair's reference, from its scene's manifest (0: not recorded)."""
-    v = scene_manifest(pair).get("ref_spp", 0)
+def reference_spp(m: dict) -> int:
+    """Samples per pixel of a scene's references, from its manifest (scene_manifest; 0: not recorded)."""
+    v = m.get("ref_spp", 0)
     return int(v) if isinstance(v, (int, float)) and v > 0 else 0
 
 
@@ -118,8 +117,9 @@ def evaluate(dataset: str, model, spps=None, kinds=None, max_scenes: int | None 
         pairs = [p for p in pairs if p.scene in keep]
     result = Result()
     for pair, stops in ((p, e) for p in pairs for e in exposures):
-        family, ref_spp = scene_family(pair), reference_spp(pair)
-        film, sampler = render_conditions(pair)
+        manifest = scene_manifest(pair)   # read once for the family, the references' spp and the film
+        family, ref_spp = scene_family(manifest), reference_spp(manifest)
+        film, sampler = render_conditions(manifest)
         group = "held-out" if family in held_out else "in-family"
         noisy, ref = exposed(read_deep(pair.noisy), stops), read_deep(pair.reference)
         z = metrics.split_depth(ref)

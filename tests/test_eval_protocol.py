@@ -83,7 +83,7 @@ def test_film_note_flags_frames_whose_noise_flat_oidn_keeps(tmp_path):
     import json
     from types import SimpleNamespace
 
-    from ranad_core.evaluate import film_note, render_conditions
+    from ranad_core.evaluate import film_note, render_conditions, scene_manifest
 
     box = [{**r, "film": "box"} for r in _rows()]
     wide = box + [{**r, "film": "gaussian 2"} for r in _rows()]
@@ -94,8 +94,8 @@ def test_film_note_flags_frames_whose_noise_flat_oidn_keeps(tmp_path):
     scene = tmp_path / "scene_0000"
     (scene / "deepz").mkdir(parents=True)
     pair = SimpleNamespace(noisy=scene / "deepz" / "noisy_spp4.0000.exr")
-    assert render_conditions(pair) == ("?", "?")
+    assert render_conditions(scene_manifest(pair)) == ("?", "?")
     (scene / "manifest.json").write_text(json.dumps({"preset": "glass"}))
-    assert render_conditions(pair) == ("box", "independent")
+    assert render_conditions(scene_manifest(pair)) == ("box", "independent")
     (scene / "manifest.json").write_text(json.dumps({"pixel_filter": ["gaussian", 2.0], "sampler": "sobol"}))
-    assert render_conditions(pair) == ("gaussian 2", "sobol")
+    assert render_conditions(scene_manifest(pair)) == ("gaussian 2", "sobol")
