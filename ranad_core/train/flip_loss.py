@@ -25,6 +25,8 @@ import math
 import torch
 import torch.nn.functional as F
 
+from ..model.prior import LUMA   # the Rec. 709 luminance FLIP's exposures read
+
 PPD = 0.7 * 3840 / 0.7 * math.pi / 180       # pixels per degree of the default observer (about 67)
 QC, QF, PC, PT = 0.7, 0.5, 0.4, 0.95           # colour and feature exponents; error compression
 # ACES (Narkowicz's fit) with its 0.6 pre-exposure folded in: (K0 x^2 + K1 x) / (K3 x^2 + K4 x + K5)
@@ -37,9 +39,9 @@ WHITE = (0.950428545, 1.0, 1.088900371)        # D65
 RGB2XYZ = ((10135552 / 24577794, 8788810 / 24577794, 4435075 / 24577794),
            (2613072 / 12288897, 8788810 / 12288897, 887015 / 12288897),
            (1425312 / 73733382, 8788810 / 73733382, 70074185 / 73733382))
+XYZ2RGB = ((3.241003275, -1.537398934, -0.498615861), (-0.969224334, 1.875930071, 0.041554224),
+           (0.055639423, -0.204011202, 1.057148933))
 EPS = 1e-6
-
-_FILTERS: dict = {}
 
 
 def _aces_inverse(t: float) -> float:
@@ -52,7 +54,7 @@ def exposures(ref: torch.Tensor) -> list:
     """Exposures (stops) for a [3, H, W] linear reference: from the one that maps its brightest luminance to 0.85
     to the one that maps its median there, one per stop (at least two). Two guards the evaluator lacks, for training
     crops: at most MAX_EXPOSURES, and a median of 0 (a crop mostly black) taken as 2^-20 of the brightest."""
-    y = (ref[0] * 0.2126 + ref[1] * 0.7152 + ref[2] * 0.0722).detach().float()
+    y = torch.einsum("c,chw->hw", ref.new_tensor(LUMA), ref).detach().float()
     hi = float(y.max())
     if hi <= 0:
         return [0.0]
@@ -63,28 +65,26 @@ def exposures(ref: torch.Tensor) -> list:
     return [start + i * (stop - start) / (n - 1) for i in range(n)]
 
 
+@functools.cache
 def _filters(device, dtype) -> tuple[torch.Tensor, torch.Tensor]:
     """(csf [3, 1, k, k], features [4, 1, j, j]: edge x, edge y, point x, point y), cached per device and dtype."""
-    key = (str(device), dtype)
-    if key not in _FILTERS:
-        r = math.ceil(3 * math.sqrt(max(b for c in CSF for b in (c[1], c[3])) / (2 * math.pi ** 2)) * PPD)
-        t = torch.arange(-r, r + 1, dtype=torch.float64) / PPD
-        z = t[:, None] ** 2 + t[None, :] ** 2
-        csf = []
-        for a1, b1, a2, b2 in CSF:
-            s = a1 * math.sqrt(math.pi / b1) * torch.exp(-math.pi ** 2 * z / b1) \
-                + a2 * math.sqrt(math.pi / b2) * torch.exp(-math.pi ** 2 * z / b2)
-            csf.append(s / s.sum())
-        sd = 0.5 * 0.082 * PPD
-        rf = math.ceil(3 * sd)
-        u = torch.arange(-rf, rf + 1, dtype=torch.float64)
-        g = torch.exp(-(u[None, :] ** 2 + u[:, None] ** 2) / (2 * sd * sd))
-        feats = []
-        for h in (-u[None, :] * g, (u[None, :] ** 2 / (sd * sd) - 1) * g):
-            k = torch.where(h < 0, h / -h[h < 0].sum(), h / h[h > 0].sum())
-            feats += [k, k.T]
-        _FILTERS[key] = (torch.stack(csf)[:, None].to(device, dtype), torch.stack(feats)[:, None].to(device, dtype))
-    return _FILTERS[key]
+    r = math.ceil(3 * math.sqrt(max(b for c in CSF for b in (c[1], c[3])) / (2 * math.pi ** 2)) * PPD)
+    t = torch.arange(-r, r + 1, dtype=torch.float64) / PPD
+    z = t[:, None] ** 2 + t[None, :] ** 2
+    csf = []
+    for a1, b1, a2, b2 in CSF:
+        s = a1 * math.sqrt(math.pi / b1) * torch.exp(-math.pi ** 2 * z / b1) \
+            + a2 * math.sqrt(math.pi / b2) * torch.exp(-math.pi ** 2 * z / b2)
+        csf.append(s / s.sum())
+    sd = 0.5 * 0.082 * PPD
+    rf = math.ceil(3 * sd)
+    u = torch.arange(-rf, rf + 1, dtype=torch.float64)
+    g = torch.exp(-(u[None, :] ** 2 + u[:, None] ** 2) / (2 * sd * sd))
+    feats = []
+    for h in (-u[None, :] * g, (u[None, :] ** 2 / (sd * sd) - 1) * g):
+        k = torch.where(h < 0, h / -h[h < 0].sum(), h / h[h > 0].sum())
+        feats += [k, k.T]
+    return torch.stack(csf)[:, None].to(device, dtype), torch.stack(feats)[:, None].to(device, dtype)
 
 
 def _conv(x: torch.Tensor, k: torch.Tensor) -> torch.Tensor:
@@ -137,9 +137,7 @@ def ldr_flip_map(ref: torch.Tensor, test: torch.Tensor) -> torch.Tensor:
         f = _conv(o, csf)
         y = (f[:, 0:1] + 16) / 116
         xyz = torch.cat([y + f[:, 1:2] / 500, y, y - f[:, 2:3] / 200], 1) * white
-        rgb = _mat(xyz, [[3.241003275, -1.537398934, -0.498615861], [-0.969224334, 1.875930071, 0.041554224],
-                         [0.055639423, -0.204011202, 1.057148933]])
-        return _lab(rgb.clamp(0, 1))
+        return _lab(_mat(xyz, XYZ2RGB).clamp(0, 1))
 
     oref, otest = ycxcz(ref), ycxcz(test)
     cmax = _cmax()
