@@ -12,7 +12,6 @@ from ranad_core import metrics
 from ranad_core.baselines import oidn_flat
 from ranad_core.model.prior import LUMA
 
-R, G = int(sys.argv[1]), float(sys.argv[2])
 real = ev.denoise_window
 
 
@@ -27,7 +26,7 @@ def box(x: np.ndarray, r: int) -> np.ndarray:
     return tot / ((y1 - y0)[:, None] * (x1 - x0)[None, :])
 
 
-def gained(model, images, centre, **kw):
+def gained(model, images, centre, R: int = 1, G: float = 4.0, **kw):
     res = real(model, images, centre, **kw)
     img = res.image
     luma = np.asarray(LUMA, np.float64)
@@ -41,6 +40,10 @@ def gained(model, images, centre, **kw):
     return dataclasses.replace(res, image=img.with_values(vals))
 
 
-ev.denoise_window = gained
-from ranad_cli.main import cli  # noqa: E402
-cli.main(["eval", *sys.argv[3:]])
+if __name__ == "__main__":   # importable (runs/generalization-s28/gain_diag.py reads box)
+    import functools
+
+    from ranad_cli.main import cli
+
+    ev.denoise_window = functools.partial(gained, R=int(sys.argv[1]), G=float(sys.argv[2]))
+    cli.main(["eval", *sys.argv[3:]])

@@ -3,6 +3,7 @@ help? Flat FLIP over a set's deep-Z pairs per spp, as a ratio to flat OIDN's, of
 global gain (reference light / ranad light); ranad times g = box_R(L_noisy) / box_R(L_ranad) (clamped to [1/G, G]),
 for several R. Usage: python gain_diag.py SET [MODEL]"""
 import sys
+from pathlib import Path
 import collections
 import numpy as np
 from ranad_core.exr import read_deep
@@ -13,18 +14,8 @@ from ranad_core.train.data import find_pairs
 from ranad_core.model.store import load_model
 from ranad_core.model.prior import LUMA
 
-
-
-def box(x: np.ndarray, r: int) -> np.ndarray:
-    """Mean over a (2r+1)^2 box, the box cut at the frame's edges (summed-area table)."""
-    h, w = x.shape
-    s = np.zeros((h + 1, w + 1))
-    s[1:, 1:] = x.cumsum(0).cumsum(1)
-    y0, y1 = np.clip(np.arange(h) - r, 0, h), np.clip(np.arange(h) + r + 1, 0, h)
-    x0, x1 = np.clip(np.arange(w) - r, 0, w), np.clip(np.arange(w) + r + 1, 0, w)
-    tot = s[y1][:, x1] - s[y0][:, x1] - s[y1][:, x0] + s[y0][:, x0]
-    return tot / ((y1 - y0)[:, None] * (x1 - x0)[None, :])
-
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "generalization-s26"))
+from ev_gain import box  # noqa: E402  (the same summed-area box mean)
 
 model = load_model(sys.argv[2] if len(sys.argv) > 2 else None).model
 luma = np.asarray(LUMA, np.float64)
