@@ -1,16 +1,10 @@
 #!/bin/bash
 # session 28: v7 fine-tuned with the HDR-FLIP term (--loss-weight flip=2), otherwise session 27's t16 recipe at lr
 # 1e-4; scored on the box and the Gaussian held-out sets
-S=s28
-. "$(dirname "$0")/../generalization-s27/common.sh"
+. "$(dirname "$0")/common.sh"
 while [ ! -f $S/chain1.done ]; do sleep 20; done
-( time OMP_NUM_THREADS=2 ranad train train_g35_boxsob train_g35_boxsob train_g33_win train_g31_sub train_g30_sub \
-    -o $R/cpu-small-pdl-gza-fl-t1 --config cpu-small-pdl-gza --steps 2000 --crop 64 --lr 1e-4 --seed 28 \
-    --init cpu-small-pdl-gza-v7 --loss-weight alpha=2 --loss-weight separation=1 --loss-weight flip=2 \
-    --checkpoint-every 200 --spp-weight 4=2 --spp-weight 64=2 --spp-weight 128=2 --rotate-normals 0.5 \
+( time OMP_NUM_THREADS=2 ranad train $T16_POOL -o $R/cpu-small-pdl-gza-fl-t1 --config cpu-small-pdl-gza \
+    --steps 2000 --lr 1e-4 --seed 28 $T16_OPTS --init cpu-small-pdl-gza-v7 --loss-weight flip=2 \
     ) >> $S/train_flt1.log 2>&1
-for s in heldout_g1int8_box heldout_g1int8_boxsob heldout_g1int8 heldout_g1fog_boxsob heldout_g1sg8_boxsob \
-    heldout_g1sg8 heldout_g1w4 heldout_g1ac8 heldout_g1fog; do
-    ev flt1 $s $R/cpu-small-pdl-gza-fl-t1/checkpoint.pt
-done
+ev_sets flt1 $R/cpu-small-pdl-gza-fl-t1/checkpoint.pt $HELDOUT9
 touch $S/chain2.done

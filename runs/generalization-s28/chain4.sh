@@ -4,8 +4,7 @@
 # weights frozen), and the card's remaining sets: normals turned, yawed, 1/2/128 spp, in-family, shots, exposure sweep
 # usage: chain4.sh CAND [EXPORT OPTIONS]     (run from anywhere; data in /work/data); session 28 ran
 #   chain4.sh /work/main/runs/cpu-small-pdl-gza-fl-t1 --interpolate cpu-small-pdl-gza-v7=0.5
-S=s28
-. "$(dirname "$0")/../generalization-s27/common.sh"
+. "$(dirname "$0")/common.sh"
 CAND=$1
 [ -f $S/v8.safetensors ] || bash $R/generalization-s23/export.sh $CAND $S/v8.safetensors "${@:2}" \
     > $S/export_v8.log 2>&1 || exit 1

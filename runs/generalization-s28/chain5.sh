@@ -1,14 +1,8 @@
 #!/bin/bash
 # session 28: fl-t1's recipe with the HDR-FLIP term twice as strong (flip=4), scored on the nine held-out sets
-S=s28
-. "$(dirname "$0")/../generalization-s27/common.sh"
-( time OMP_NUM_THREADS=2 ranad train train_g35_boxsob train_g35_boxsob train_g33_win train_g31_sub train_g30_sub \
-    -o $R/cpu-small-pdl-gza-fl-t3 --config cpu-small-pdl-gza --steps 2000 --crop 64 --lr 1e-4 --seed 28 \
-    --init cpu-small-pdl-gza-v7 --loss-weight alpha=2 --loss-weight separation=1 --loss-weight flip=4 \
-    --checkpoint-every 200 --spp-weight 4=2 --spp-weight 64=2 --spp-weight 128=2 --rotate-normals 0.5 \
+. "$(dirname "$0")/common.sh"
+( time OMP_NUM_THREADS=2 ranad train $T16_POOL -o $R/cpu-small-pdl-gza-fl-t3 --config cpu-small-pdl-gza \
+    --steps 2000 --lr 1e-4 --seed 28 $T16_OPTS --init cpu-small-pdl-gza-v7 --loss-weight flip=4 \
     ) >> $S/train_flt3.log 2>&1
-for s in heldout_g1int8_box heldout_g1int8_boxsob heldout_g1int8 heldout_g1fog_boxsob heldout_g1sg8_boxsob \
-    heldout_g1sg8 heldout_g1w4 heldout_g1ac8 heldout_g1fog; do
-    ev flt3 $s $R/cpu-small-pdl-gza-fl-t3/checkpoint.pt
-done
+ev_sets flt3 $R/cpu-small-pdl-gza-fl-t3/checkpoint.pt $HELDOUT9
 touch $S/chain5.done
