@@ -60,7 +60,7 @@ def main() -> None:
     primary = time.perf_counter() - t
     t = time.perf_counter()
     out = denoise_aovs(model, [img], 0, mapping, layers, res.embeddings, res.perms, res.offsets, None, res.merge_gap,
-                       res.merges, res.split, res.dark_radius)
+                       res.merges, res.split, res.dark_radius, res.gain)
     reuse = time.perf_counter() - t
     t = time.perf_counter()
     for g in range(a.groups):                              # each group as the beauty of its own primary pass

@@ -13,6 +13,7 @@ from tqdm import tqdm
 from .params import FiniteFloat, device_option
 from ranad_core.binmerge import MERGE_GAP
 from ranad_core.darkness import DARK_RADIUS
+from ranad_core.lightmatch import CLAMP as LIGHT_CLAMP, RADIUS as LIGHT_RADIUS
 from ranad_core.errors import RanadError
 
 
@@ -77,6 +78,12 @@ def parse_bytes(text: str) -> float:
                    "filled in, and so are windows near isolated lit pixels (a dim region few samples reach). "
                    "Objects (id channel) with no lit bin, such as holdout mattes, stay black too. 0 turns it "
                    "off.")
+@click.option("--light-match/--no-light-match", "light_match", default=True, show_default=True,
+              help=f"Models on the flat prior: each pixel's denoised colour times a gain within "
+                   f"{100 * (LIGHT_CLAMP - 1):.0f}% of 1 that brings the local light (a {2 * LIGHT_RADIUS + 1}x"
+                   f"{2 * LIGHT_RADIUS + 1}-pixel mean of luminance) to flat OIDN's, which holds the light of "
+                   "smooth, bounce-lit regions better; the same gain goes to the AOVs (light groups still sum "
+                   "to the beauty).")
 @click.option("--tile", type=click.IntRange(16), default=None,
               help="Tile size in pixels (default: the tiling that fits --max-memory with the fewest bins "
                    "computed twice in the halos; on the CPU, windows of at most 0.8 M bins).")
@@ -117,7 +124,8 @@ def parse_bytes(text: str) -> float:
                    "write) with the CPU seconds of each and the threads it kept busy (near 1: a serial stage), "
                    "and a per-tile summary (bins with the halo, halo overlap, seconds per tile).")
 def denoise_cmd(inputs, output, frames, model, device, threads, kind, maps, preset, motion_units, fps, shutter,
-                motion_y, keep_noisy, keep_depth, bin_merge, dark_radius, tile, halo, max_memory, cache_dir,
+                motion_y, keep_noisy, keep_depth, bin_merge, dark_radius, light_match, tile, halo, max_memory,
+                cache_dir,
                 skip_existing, shard, strict, window, aovs, reference, parts, flow, flow_direction, flow_channels,
                 profile):
     """Denoise deep EXR INPUTS (files or patterns such as beauty.####.exr) into deep EXRs with the same pixels,
@@ -167,6 +175,7 @@ def denoise_cmd(inputs, output, frames, model, device, threads, kind, maps, pres
             raise RanadError(f"cannot create the cache folder ({e.strerror or e})", cache_dir) from None
     opts = ShotOptions(model_spec=model, overrides=overrides, tile=tile, halo=halo, max_memory=budget,
                        keep_noisy=keep_noisy, keep_depth=keep_depth, bin_merge=bin_merge, dark_radius=dark_radius,
+                       light_match=light_match,
                        cache_dir=cache_dir,
                        skip_existing=skip_existing, strict=strict,
                        aovs=aovs, kind=kind, parts=tuple(parts), flow=flow, flow_direction=flow_direction,

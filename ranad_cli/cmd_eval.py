@@ -42,8 +42,10 @@ from .params import FiniteFloat, int_list
               help="ranad's thin-bin merging gap, as `ranad denoise --bin-merge` (default: its default; 0: off).")
 @click.option("--dark-radius", "dark_radius", type=click.IntRange(0, 8), default=None,
               help="ranad's black neighbourhoods, as `ranad denoise --dark-radius` (default: its default; 0: off).")
+@click.option("--light-match/--no-light-match", "light_match", default=True, show_default=True,
+              help="ranad's light matching to the flat prior, as `ranad denoise --light-match`.")
 def eval_cmd(dataset, out, model, spp, kinds, scenes, grid_pairs, temporal, cross_model, window, held_out,
-             exposures, bin_merge, dark_radius):
+             exposures, bin_merge, dark_radius, light_match):
     """Evaluate on DATASET (the output of `ranad synth` with other seeds than the training data): for every
     scene, deep kind and spp, the noisy input, flat OIDN, OIDN then recolour (the studio workflow) and ranad
     are scored against the reference: SMAPE, DSSIM and HDR-FLIP of the flattened beauty; per-bin SMAPE; a
@@ -83,7 +85,7 @@ def eval_cmd(dataset, out, model, spp, kinds, scenes, grid_pairs, temporal, cros
         raise RanadError(f"cannot create the output folder ({e.strerror or e})", out) from None
     with tqdm(total=total, desc="eval", unit="pair") as bar:
         result = ev.evaluate(dataset, loaded.model, spps, kinds, scenes, grid_pairs, bar.update, stops, held,
-                             bin_merge, dark_radius)
+                             bin_merge, dark_radius, light_match)
     name = os.path.basename(os.path.normpath(dataset))
     n_scenes = len({r["scene"] for r in result.rows})
     if held or stops != (0,):

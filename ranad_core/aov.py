@@ -25,7 +25,7 @@ import fnmatch
 import numpy as np
 import torch
 
-from . import darkness
+from . import darkness, lightmatch
 from .channels import ALIASES, DEPTH, DEPTHS, EMISSION, RGB, SPECULAR, ChannelMap, canonical
 from .deep import DeepImage, replace_nonfinite, unsort
 from .errors import RanadError
@@ -103,7 +103,8 @@ def _values(img: DeepImage, m: ChannelMap, layers: dict, perm: np.ndarray) -> di
 
 def denoise_aovs(model, images: list, centre: int, mapping: ChannelMap, layers: dict, embeddings: list,
                  perms: list, offsets: list, flows: list | None = None, merge_gap: float = 0.0,
-                 merges: list | None = None, split: np.ndarray | None = None, dark_radius: int = 0) -> dict:
+                 merges: list | None = None, split: np.ndarray | None = None, dark_radius: int = 0,
+                 gain: np.ndarray | None = None) -> dict:
     """Denoised AOV layers of frame `centre`: layer -> [N, 3] in the file's bin order.
 
     images: the window's frames holding the beauty channels the mapping names and the AOV channels, not yet
@@ -111,7 +112,8 @@ def denoise_aovs(model, images: list, centre: int, mapping: ChannelMap, layers: 
     flows: the per-pixel flows the primary pass used, if any; merge_gap/merges/split: the thin bins the primary
     pass merged (binmerge: its gap, per frame the group of each sorted bin or None, the centre's share-back
     factors): the AOVs are merged and shared back the same way; dark_radius: the primary pass's (darkness): the
-    bins it kept black keep their noisy AOVs."""
+    bins it kept black keep their noisy AOVs; gain: the primary pass's light-matching gain per pixel (lightmatch;
+    None: it applied none), applied to the denoised layers the same way."""
     from . import binmerge
     from .denoise import is_cross_frame
     from .motion import compensate
@@ -166,7 +168,13 @@ def denoise_aovs(model, images: list, centre: int, mapping: ChannelMap, layers: 
                 else:
                     res = model.reconstruct_layer(name, feats[0], window[0], vals[0][name][:, a:b])
                 denoised[name].append(res)
-    total_out = (torch.cat(denoised["diffuse"], 1) + torch.cat(denoised["specular"], 1) + vals[centre]["pass"])
+    total_out = torch.cat(denoised["diffuse"], 1) + torch.cat(denoised["specular"], 1)
+    if gain is not None:
+        gain = np.asarray(gain, np.float32).reshape(-1)
+        if gain.shape[0] != h * w or not np.isfinite(gain).all():
+            raise RanadError("the cache's light-matching gains do not match the frame (a damaged cache?)", None)
+        total_out = total_out * torch.from_numpy(lightmatch.bin_factors(gain, offsets[centre])).to(dev)
+    total_out = total_out + vals[centre]["pass"]
     out = total_out.cpu().numpy()
     if centre_groups is not None:
         factors = None if split is None else np.asarray(split, np.float64).reshape(-1)
@@ -232,7 +240,7 @@ def denoise_cached_frame(loaded, cache_path: str, tensors: dict, meta: dict, pat
                               [tensors[f"embeddings.{i}"] for i in range(k)],
                               [tensors[f"perm.{i}"] for i in range(k)], [tensors[f"offsets.{i}"] for i in range(k)],
                               None, float(meta.get("merge_gap", "0")), merges if any(x is not None for x in merges)
-                              else None, tensors.get("split"), _dark_radius(meta, cache_path))
+                              else None, tensors.get("split"), _dark_radius(meta, cache_path), tensors.get("gain"))
     except RanadError as e:   # the cache and the files disagree: name the cache
         if e.path is None:
             raise RanadError(e.problem, cache_path) from None

@@ -10,7 +10,8 @@ to rerun on other values:
   compensated frame; for the centre frame, of the file), `offsets.k` int64 [H*W+1], `z_stats` float64 [K, 2]
   (the depth standardisation used per frame); where thin bins were merged (binmerge), `merge.k` int64 [N_k] (each
   sorted bin's merged bin; embeddings and offsets are then the merged bins') and `split` float32 [N] (the
-  centre's share-back factors);
+  centre's share-back factors); where the primary pass matched the light (lightmatch), `gain` float32 [H*W]
+  (each pixel's gain of the denoised colour; absent in older caches: none);
 - metadata (strings): `format` ("ranad-cache/1"), `model_id` (name@sha256 prefix of the weights), `model`
   (what --model resolved to), `input` (absolute path of the denoised file), `window` (JSON list of the
   window's input paths), `centre` (index of the denoised frame in it), `frame`, `layout_sha` (fingerprint
@@ -87,6 +88,8 @@ def write_cache(path: str, img: DeepImage, result, model_id: str, model_spec: st
             tensors[f"merge.{k}"] = np.ascontiguousarray(index, np.int64)
     if result.merges:
         tensors["split"] = np.ascontiguousarray(result.split, np.float32)
+    if result.gain is not None:
+        tensors["gain"] = np.ascontiguousarray(result.gain, np.float32)
     window = [os.path.abspath(p) for p in (window_paths or [input_path])]
     meta = {"format": FORMAT, "model_id": model_id, "model": model_spec, "input": os.path.abspath(input_path),
             "window": json.dumps(window), "centre": str(result.centre),

@@ -25,7 +25,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import torch
 
-from . import binmerge, darkness, heap
+from . import binmerge, darkness, heap, lightmatch
 from .binmerge import Groups
 from .channels import (ALPHA, DEPTH, DEPTH_BACK, DEPTHS, FLAT_NOISY, PRIOR, ChannelMap, canonical, detect,
                        layer_values, split_layer)
@@ -53,6 +53,7 @@ class FrameResult:
     split: np.ndarray | None = None      # the centre's binmerge.split_factors (None: nothing merged)
     merge_gap: float = 0.0               # the binmerge gap the frames were merged with
     dark_radius: int = 0                 # darkness: black windows of this radius and holdouts kept black (0: off)
+    gain: np.ndarray | None = None       # lightmatch: float32 [H*W] gain of the denoised colour (None: not applied)
 
     @property
     def perm(self):
@@ -294,7 +295,7 @@ def denoise_window(model, images: list, centre: int, mapping: ChannelMap | None 
                    halo: int | None = None, keep_noisy: str | None = None, want_embeddings: bool = False,
                    progress=None, flows: list | None = None, priors: list | None = None,
                    keep_depth: bool = False, merge_gap: float | None = None,
-                   dark_radius: int | None = None) -> FrameResult:
+                   dark_radius: int | None = None, light_match: bool = True) -> FrameResult:
     """Denoise frame `centre` of `images` (a window of consecutive frames; neighbours are motion-compensated onto
     it, in display coordinates where their data windows differ). `tile`: tile size in pixels (None: the whole
     frame); `halo`: None for the model's receptive field; `keep_noisy`: a prefix under which the noisy versions
@@ -307,7 +308,8 @@ def denoise_window(model, images: list, centre: int, mapping: ChannelMap | None 
     not reconstructed and the file's depths are written as they are. `merge_gap`: thin bins of one surface within
     this relative depth gap are denoised as one and shared back (binmerge; None: its default, 0: off).
     `dark_radius`: the radius of darkness' black windows: bins of exactly black windows and of holdout objects keep
-    their colour, 0 (None: its default, 0: off).
+    their colour, 0 (None: its default, 0: off). `light_match`: models on the flat prior bring each region's light
+    within 2% of the prior's (lightmatch.py; False: off).
 
     Tiles run where the model is (`model.to("cuda")`: `ranad denoise --device cuda`), and so does the flat prior's
     OIDN; inputs are prepared and outputs assembled on the CPU."""
@@ -318,11 +320,11 @@ def denoise_window(model, images: list, centre: int, mapping: ChannelMap | None 
         return _denoise_window(model, images, centre, mapping, tile, halo, keep_noisy, want_embeddings, progress,
                                flows, priors, keep_depth, device,
                                binmerge.MERGE_GAP if merge_gap is None else float(merge_gap),
-                               darkness.DARK_RADIUS if dark_radius is None else int(dark_radius))
+                               darkness.DARK_RADIUS if dark_radius is None else int(dark_radius), light_match)
 
 
 def _denoise_window(model, images, centre, mapping, tile, halo, keep_noisy, want_embeddings, progress, flows,
-                    priors, keep_depth, device, merge_gap, dark_radius) -> FrameResult:
+                    priors, keep_depth, device, merge_gap, dark_radius, light_match=True) -> FrameResult:
     from .motion import compensate
 
     cross = is_cross_frame(model)
@@ -402,6 +404,11 @@ def _denoise_window(model, images, centre, mapping, tile, halo, keep_noisy, want
         heap.relieve()
         if progress:
             progress(1)
+    gain = None
+    if light_match and features == "prior" and n:
+        with stage("light match"):
+            gain = lightmatch.frame_gain(c.srt, outs)
+            lightmatch.apply(outs, gain, c.srt.offsets)
     with stage("assemble"):
         factors = None
         if c.groups is not None and n:
@@ -418,7 +425,7 @@ def _denoise_window(model, images, centre, mapping, tile, halo, keep_noisy, want
     return FrameResult(out, img.num_bins, c.nonfinite, tiles, embs, [fr.perm for fr in frames],
                        [fr.stats for fr in frames], [fr.srt.offsets for fr in frames], mapping, dropped,
                        merges if any(g is not None for g in merges) else None, factors, merge_gap, dark_radius,
-                       centre)
+                       gain, centre)
 
 
 def write_columns(values: np.ndarray, channels: list, names, data) -> None:

@@ -102,7 +102,7 @@ class Result:
 
 def evaluate(dataset: str, model, spps=None, kinds=None, max_scenes: int | None = None, grid_pairs: int = 4,
              progress=None, exposures=(0,), held_out=(), merge_gap: float | None = None,
-             dark_radius: int | None = None) -> Result:
+             dark_radius: int | None = None, light_match: bool = True) -> Result:
     """Scores every selected pair; `model` is a RaNAD in eval mode.
 
     exposures: stops by which each noisy input is scaled before every method runs; the outputs are scaled back
@@ -110,7 +110,7 @@ def evaluate(dataset: str, model, spps=None, kinds=None, max_scenes: int | None 
     rendered brighter or darker. held_out: scene families (synth presets) the model never trained on; rows get
     group "held-out" for them and "in-family" otherwise (the generalization protocol). merge_gap: ranad's
     thin-bin merging (binmerge; None: its default, 0: off); dark_radius: its black neighbourhoods (darkness; None:
-    its default, 0: off)."""
+    its default, 0: off); light_match: its light matching to the flat prior (lightmatch)."""
     pairs = [p for p in find_pairs(dataset) if (not spps or p.spp in spps) and (not kinds or p.kind in kinds)]
     if max_scenes:
         keep = sorted({p.scene for p in pairs})[:max_scenes]
@@ -132,7 +132,8 @@ def evaluate(dataset: str, model, spps=None, kinds=None, max_scenes: int | None 
         outputs["recolour"] = recolour(noisy, outputs["oidn"])
         seconds["recolour"] = time.perf_counter() - t + seconds["oidn"]
         t = time.perf_counter()
-        outputs["ranad"] = denoise_window(model, [noisy], 0, merge_gap=merge_gap, dark_radius=dark_radius).image
+        outputs["ranad"] = denoise_window(model, [noisy], 0, merge_gap=merge_gap, dark_radius=dark_radius,
+                                          light_match=light_match).image
         seconds["ranad"] = time.perf_counter() - t
         outputs["noisy"], seconds["noisy"] = noisy, 0.0
         if stops:  # back to the reference's exposure

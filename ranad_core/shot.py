@@ -40,6 +40,7 @@ class ShotOptions:
     keep_depth: bool = False                         # write the input's depths, not denoised ones
     bin_merge: float | None = None                   # binmerge gap (None: its default; 0: off)
     dark_radius: int | None = None                   # darkness radius (None: its default; 0: off)
+    light_match: bool = True                         # lightmatch: local light within 2% of the flat prior's
     cache_dir: str | None = None
     skip_existing: bool = False
     strict: bool = False                             # non-finite samples, negative depths: error instead of fix
@@ -209,7 +210,7 @@ def with_denoised_aovs(model, images, centre, mapping, result, pattern: str, sou
         raise RanadError(f"no AOV layers match {pattern!r} (layers with .R/.G/.B channels)", source)
     out = denoise_aovs(model, images, centre, mapping, layers, result.embeddings, result.perms, result.offsets,
                        flows, result.merge_gap if result.merges else 0.0, result.merges, result.split,
-                       result.dark_radius)
+                       result.dark_radius, result.gain)
     vals = result.image.values.copy()
     for layer, chans in layers.items():
         for i, c in enumerate(chans):
@@ -497,7 +498,7 @@ def _denoise_part(model, images, centre, flows, where, opts, summary, halo, tile
         tile_bar.reset(ntiles)
     result = denoise_window(model, images, centre, mapping, tile, halo, opts.keep_noisy,
                             opts.cache_dir is not None or bool(opts.aovs), tile_bar, flows, priors, opts.keep_depth,
-                            opts.bin_merge, opts.dark_radius)
+                            opts.bin_merge, opts.dark_radius, opts.light_match)
     result.tile = tile
     if opts.aovs:
         with stage("aovs"):

@@ -89,7 +89,7 @@ def test_light_groups_sum_to_the_denoised_beauty(kind):
     res = denoise_window(model, images, centre, want_embeddings=True, tile=16)   # tiles: the primary pass
     layers = aov_layers(frames[1].channels, "lg_*")
     out = denoise_aovs(model, images, centre, detect(frames[1]), layers, res.embeddings, res.perms, res.offsets,
-                       None, res.merge_gap, res.merges, res.split, res.dark_radius)
+                       None, res.merge_gap, res.merges, res.split, res.dark_radius, res.gain)
     lg_d = sum(out[g].astype(np.float64) for g in GROUPS)
     _, rgb_d = sums(res.image)
     scale = np.abs(rgb_d).max()

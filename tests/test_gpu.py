@@ -77,7 +77,7 @@ def _run(model_name: str, device: str, frames: list, tile: int = 32):
     res = denoise_window(model, images, centre, tile=tile, want_embeddings=True)
     layers = aov_layers(frames[1].channels, "lg_*")
     aovs = denoise_aovs(model, images, centre, detect(frames[1]), layers, res.embeddings, res.perms, res.offsets,
-                       None, res.merge_gap, res.merges, res.split, res.dark_radius)
+                       None, res.merge_gap, res.merges, res.split, res.dark_radius, res.gain)
     return res, aovs
 
 

@@ -1,0 +1,97 @@
+"""Light matching: the denoised colour of each pixel times a gain close to 1 that brings the local light of ranad's
+flattened image (a box mean of luminance) to that of the flat prior (flat OIDN's denoised beauty).
+
+Why (runs/generalization-s29): on box-filtered held-out interiors ranad trailed flat OIDN's HDR-FLIP by smooth
+low-frequency blotches and about 1% lost light (runs/generalization-s28, section 1), while OIDN's low frequencies
+there are right. Elsewhere (fog, glass, Gaussian-filtered renders) OIDN's are the worse ones, so the gain is held
+within [1 / CLAMP, CLAMP]: a small local correction of the light, never a copy of OIDN's image.
+
+The gain is one number per pixel and multiplies every denoised bin of the pixel (the diffuse and specular layers
+and the residual the model denoises with the diffuse; not the emission, which passes through). So every output
+stays linear in the noisy values: `ranad aov` applies the same gain (the cache keeps it) and light groups still
+sum to the beauty. A ratio of two luminances, it does not change when the render's exposure does; it is computed
+on the whole assembled frame, so tiles agree.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .channels import ALPHA, EMISSION, PRIOR
+from .deep import DeepImage, transmittance
+from .model.prior import LUMA
+
+RADIUS = 8      # box half-width in pixels: a (2R + 1)^2 window
+CLAMP = 1.02    # gains kept within [1 / CLAMP, CLAMP]
+
+
+def box_mean(x: np.ndarray, r: int) -> np.ndarray:
+    """Mean of x [H, W] over a (2r+1)^2 box, the box cut at the frame's edges (a summed-area table, float64)."""
+    h, w = x.shape
+    s = np.zeros((h + 1, w + 1))
+    s[1:, 1:] = np.asarray(x, np.float64).cumsum(0).cumsum(1)
+    y0, y1 = np.clip(np.arange(h) - r, 0, h), np.clip(np.arange(h) + r + 1, 0, h)
+    x0, x1 = np.clip(np.arange(w) - r, 0, w), np.clip(np.arange(w) + r + 1, 0, w)
+    tot = s[y1][:, x1] - s[y0][:, x1] - s[y1][:, x0] + s[y0][:, x0]
+    return tot / ((y1 - y0)[:, None] * (x1 - x0)[None, :])
+
+
+def pixel_gain(target: np.ndarray, current: np.ndarray, radius: int = RADIUS, clamp: float = CLAMP) -> np.ndarray:
+    """float32 [H, W]: box_R(target) / box_R(current) held within [1 / clamp, clamp] (1 where the box holds no
+    light); target and current are [H, W] luminances (negative values count as 0)."""
+    t = box_mean(np.maximum(np.nan_to_num(target), 0), radius)
+    c = box_mean(np.maximum(np.nan_to_num(current), 0), radius)
+    g = np.divide(t, c, out=np.ones_like(t), where=(c > 0) & (t > 0))
+    return np.clip(g, 1.0 / clamp, clamp).astype(np.float32)
+
+
+def denoised_colour(outs: dict) -> np.ndarray:
+    """[N, 3] the model's denoised colour per bin: diffuse (+ the residual it carries in columns 3-5) + specular."""
+    d = outs["diffuse"]
+    colour = d[:, :3].astype(np.float64)
+    if d.shape[1] >= 6:
+        colour = colour + d[:, 3:6]
+    if "specular" in outs:
+        colour = colour + outs["specular"]
+    return colour
+
+
+def flat_luminance(colour: np.ndarray, alpha: np.ndarray, offsets: np.ndarray, height: int, width: int
+                   ) -> np.ndarray:
+    """[H, W] luminance of premultiplied bins [N, 3] composited front to back (bins in depth order per pixel)."""
+    offsets = np.asarray(offsets, np.int64)
+    counts = np.diff(offsets)
+    pix = np.repeat(np.arange(len(counts)), counts)
+    lum = np.asarray(colour, np.float64) @ LUMA * transmittance(np.asarray(alpha).reshape(-1), offsets)
+    return np.bincount(pix, weights=lum, minlength=len(counts)).reshape(height, width)
+
+
+def frame_gain(srt: DeepImage, outs: dict, radius: int = RADIUS, clamp: float = CLAMP) -> np.ndarray:
+    """float32 [H * W]: the gain of every pixel of a denoised frame. `srt`: the frame as the model read it (bins in
+    depth order, the flat prior's channels attached: prior.with_prior); `outs`: the model's outputs in that bin
+    order (name -> [N, C]; the denoised alpha where there is one)."""
+    h, w = srt.height, srt.width
+    alpha = np.clip(outs["alpha"][:, 0], 0, 1) if "alpha" in outs else np.clip(srt.channel(ALPHA), 0, 1)
+    colour = denoised_colour(outs)
+    if all(c in srt.channels for c in EMISSION):   # emission passes through the model, but it is light in the frame
+        colour = colour + srt.columns(EMISSION)
+    current = flat_luminance(colour, alpha, srt.offsets, h, w)
+    first = srt.offsets[:-1]
+    has = np.diff(srt.offsets) > 0
+    target = np.zeros(h * w)
+    target[has] = srt.columns(PRIOR)[first[has]].astype(np.float64) @ LUMA
+    return pixel_gain(target.reshape(h, w), current, radius, clamp).reshape(-1)
+
+
+def bin_factors(gain: np.ndarray, offsets: np.ndarray) -> np.ndarray:
+    """float32 [N, 1]: each bin's pixel gain."""
+    return np.repeat(np.asarray(gain, np.float32).reshape(-1), np.diff(np.asarray(offsets, np.int64)))[:, None]
+
+
+def apply(outs: dict, gain: np.ndarray, offsets: np.ndarray) -> None:
+    """Multiplies the denoised colour layers of `outs` (diffuse with its residual, specular) by their pixels'
+    gains, in place."""
+    f = bin_factors(gain, offsets)
+    for name in ("diffuse", "specular"):
+        if name in outs:
+            outs[name] *= f
