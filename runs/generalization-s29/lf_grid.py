@@ -1,0 +1,45 @@
+"""Diagnostic (session 29): ranad's flat image times a clamped low-frequency luminance gain toward flat OIDN's,
+g = clip(box_R(L_oidn) / box_R(L_ranad), 1/G, G), over a grid of (R, G). Flat FLIP per spp as a ratio to flat
+OIDN's, mean over a set's deep-Z pairs. Writes one JSON line per set (for lf_summary.py).
+Usage: python lf_grid.py OUT.jsonl SET... """
+import sys
+import json
+from pathlib import Path
+import collections
+import numpy as np
+from ranad_core.exr import read_deep
+from ranad_core import metrics
+from ranad_core.baselines import oidn_flat
+from ranad_core.denoise import denoise_window
+from ranad_core.train.data import find_pairs
+from ranad_core.model.store import load_model
+from ranad_core.model.prior import LUMA
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "generalization-s26"))
+from ev_gain import box  # noqa: E402  (summed-area box mean)
+
+model = load_model(None).model
+luma = np.asarray(LUMA, np.float64)
+GRID = [(r, g) for r in (4, 8, 16, 32) for g in (1.02, 1.03, 1.05)]
+with open(sys.argv[1], "a") as out:
+    for s in sys.argv[2:]:
+        acc = collections.defaultdict(list)
+        for p in find_pairs([s]):
+            if p.kind != "deepz":
+                continue
+            noisy, ref = read_deep(p.noisy), read_deep(p.reference)
+            fr, fo = metrics.flat_rgb(ref), oidn_flat(noisy)
+            fn = metrics.flat_rgb(denoise_window(model, [noisy], 0).image)
+            lo, ln = (np.maximum(f.astype(np.float64) @ luma, 0) for f in (fo, fn))
+            row = [metrics.flip(fr, fo), metrics.flip(fr, fn)]
+            for r, G in GRID:
+                g = np.clip(box(lo, r) / np.maximum(box(ln, r), 1e-8), 1 / G, G)
+                row.append(metrics.flip(fr, fn * g[..., None].astype(np.float32)))
+            acc[p.spp].append(row)
+        for spp in sorted(acc):
+            m = np.mean(acc[spp], axis=0)
+            rec = {"set": s, "spp": spp, "ranad": m[1] / m[0],
+                   **{f"R{r}G{g}": x / m[0] for (r, g), x in zip(GRID, m[2:])}}
+            out.write(json.dumps(rec) + "\n")
+            out.flush()
+            print(s, spp, f"{rec['ranad']:.3f}", " ".join(f"{x / m[0]:.3f}" for x in m[2:]), flush=True)
