@@ -45,25 +45,26 @@ def pixel_gain(target: np.ndarray, current: np.ndarray, radius: int = RADIUS, cl
     return np.clip(g, 1.0 / clamp, clamp).astype(np.float32)
 
 
-def denoised_colour(outs: dict) -> np.ndarray:
-    """[N, 3] the model's denoised colour per bin: diffuse (+ the residual it carries in columns 3-5) + specular."""
+def denoised_luminance(outs: dict) -> np.ndarray:
+    """float64 [N]: luminance of the model's denoised colour per bin: diffuse (+ the residual it carries in columns
+    3-5) + specular. Layer by layer, so that no [N, 3] float64 copy of a frame's bins is made."""
+    luma = LUMA.astype(np.float32)
     d = outs["diffuse"]
-    colour = d[:, :3].astype(np.float64)
+    lum = (d[:, :3] @ luma).astype(np.float64)
     if d.shape[1] >= 6:
-        colour = colour + d[:, 3:6]
+        lum += d[:, 3:6] @ luma
     if "specular" in outs:
-        colour = colour + outs["specular"]
-    return colour
+        lum += outs["specular"] @ luma
+    return lum
 
 
-def flat_luminance(colour: np.ndarray, alpha: np.ndarray, offsets: np.ndarray, height: int, width: int
-                   ) -> np.ndarray:
-    """[H, W] luminance of premultiplied bins [N, 3] composited front to back (bins in depth order per pixel)."""
+def flat_luminance(lum: np.ndarray, alpha: np.ndarray, offsets: np.ndarray, height: int, width: int) -> np.ndarray:
+    """[H, W] the composite of premultiplied bins' luminances [N] front to back (bins in depth order per pixel)."""
     offsets = np.asarray(offsets, np.int64)
     counts = np.diff(offsets)
     pix = np.repeat(np.arange(len(counts)), counts)
-    lum = np.asarray(colour, np.float64) @ LUMA * transmittance(np.asarray(alpha).reshape(-1), offsets)
-    return np.bincount(pix, weights=lum, minlength=len(counts)).reshape(height, width)
+    w = np.asarray(lum, np.float64) * transmittance(np.asarray(alpha).reshape(-1), offsets)
+    return np.bincount(pix, weights=w, minlength=len(counts)).reshape(height, width)
 
 
 def frame_gain(srt: DeepImage, outs: dict, radius: int = RADIUS, clamp: float = CLAMP) -> np.ndarray:
@@ -72,10 +73,10 @@ def frame_gain(srt: DeepImage, outs: dict, radius: int = RADIUS, clamp: float = 
     order (name -> [N, C]; the denoised alpha where there is one)."""
     h, w = srt.height, srt.width
     alpha = np.clip(outs["alpha"][:, 0], 0, 1) if "alpha" in outs else np.clip(srt.channel(ALPHA), 0, 1)
-    colour = denoised_colour(outs)
+    lum = denoised_luminance(outs)
     if all(c in srt.channels for c in EMISSION):   # emission passes through the model, but it is light in the frame
-        colour = colour + srt.columns(EMISSION)
-    current = flat_luminance(colour, alpha, srt.offsets, h, w)
+        lum += srt.columns(EMISSION) @ LUMA.astype(np.float32)
+    current = flat_luminance(lum, alpha, srt.offsets, h, w)
     first = srt.offsets[:-1]
     has = np.diff(srt.offsets) > 0
     target = np.zeros(h * w)

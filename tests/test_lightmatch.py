@@ -62,7 +62,8 @@ def test_flat_luminance_matches_the_deep_composite():
     vals[:, 3] = np.clip(vals[:, 3] / 4, 0, 1)            # alpha in [0, 1]
     img = img.with_values(vals)
     want = img.flatten()[..., :3].astype(np.float64) @ LUMA
-    got = lightmatch.flat_luminance(img.columns(list(RGB)), img.channel("A"), img.offsets, img.height, img.width)
+    lum = img.columns(list(RGB)).astype(np.float64) @ LUMA
+    got = lightmatch.flat_luminance(lum, img.channel("A"), img.offsets, img.height, img.width)
     np.testing.assert_allclose(got, want, rtol=1e-5, atol=1e-6)
 
 
