@@ -1,7 +1,8 @@
 """Diagnostic (session 29): ranad's flat image times a clamped low-frequency luminance gain toward flat OIDN's,
 g = clip(box_R(L_oidn) / box_R(L_ranad), 1/G, G), over a grid of (R, G). Flat FLIP per spp as a ratio to flat
-OIDN's, mean over a set's deep-Z pairs. Writes one JSON line per set (for lf_summary.py).
-Usage: python lf_grid.py OUT.jsonl SET... """
+OIDN's, mean over a set's deep-Z pairs. Writes one JSON line per set and spp. With --rgb first: the gain per RGB
+channel instead of one from the luminance.
+Usage: python lf_grid.py [--rgb] OUT.jsonl SET... """
 import sys
 import json
 from pathlib import Path
@@ -18,11 +19,13 @@ from ranad_core.model.prior import LUMA
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "generalization-s26"))
 from ev_gain import box  # noqa: E402  (summed-area box mean)
 
+RGB = sys.argv[1] == "--rgb"
+args = sys.argv[2:] if RGB else sys.argv[1:]
 model = load_model(None).model
 luma = np.asarray(LUMA, np.float64)
 GRID = [(r, g) for r in (4, 8, 16, 32) for g in (1.02, 1.03, 1.05)]
-with open(sys.argv[1], "a") as out:
-    for s in sys.argv[2:]:
+with open(args[0], "a") as out:
+    for s in args[1:]:
         acc = collections.defaultdict(list)
         for p in find_pairs([s]):
             if p.kind != "deepz":
@@ -33,12 +36,16 @@ with open(sys.argv[1], "a") as out:
             lo, ln = (np.maximum(f.astype(np.float64) @ luma, 0) for f in (fo, fn))
             row = [metrics.flip(fr, fo), metrics.flip(fr, fn)]
             for r, G in GRID:
-                g = np.clip(box(lo, r) / np.maximum(box(ln, r), 1e-8), 1 / G, G)
-                row.append(metrics.flip(fr, fn * g[..., None].astype(np.float32)))
+                if RGB:
+                    g = np.stack([np.clip(box(np.maximum(fo[..., c], 0).astype(np.float64), r) / np.maximum(
+                        box(np.maximum(fn[..., c], 0).astype(np.float64), r), 1e-8), 1 / G, G) for c in range(3)], -1)
+                else:
+                    g = np.clip(box(lo, r) / np.maximum(box(ln, r), 1e-8), 1 / G, G)[..., None]
+                row.append(metrics.flip(fr, fn * g.astype(np.float32)))
             acc[p.spp].append(row)
         for spp in sorted(acc):
             m = np.mean(acc[spp], axis=0)
-            rec = {"set": s, "spp": spp, "ranad": m[1] / m[0],
+            rec = {"set": s, "spp": spp, "rgb": RGB, "ranad": m[1] / m[0],
                    **{f"R{r}G{g}": x / m[0] for (r, g), x in zip(GRID, m[2:])}}
             out.write(json.dumps(rec) + "\n")
             out.flush()
