@@ -1,7 +1,7 @@
 """Diagnostic (session 29): ranad's flat image times a clamped low-frequency luminance gain toward flat OIDN's,
 g = clip(box_R(L_oidn) / box_R(L_ranad), 1/G, G), over a grid of (R, G). Flat FLIP per spp as a ratio to flat
-OIDN's, mean over a set's deep-Z pairs. Writes one JSON line per set and spp. With --rgb first: the gain per RGB
-channel instead of one from the luminance.
+OIDN's, mean over a set's deep-Z pairs, of ranad without its own light matching. Writes one JSON line per set and
+spp. With --rgb first: a gain per RGB channel on top of ranad's light matching (the default since this session).
 Usage: python lf_grid.py [--rgb] OUT.jsonl SET... """
 import sys
 import json
@@ -32,7 +32,7 @@ with open(args[0], "a") as out:
                 continue
             noisy, ref = read_deep(p.noisy), read_deep(p.reference)
             fr, fo = metrics.flat_rgb(ref), oidn_flat(noisy)
-            fn = metrics.flat_rgb(denoise_window(model, [noisy], 0).image)
+            fn = metrics.flat_rgb(denoise_window(model, [noisy], 0, light_match=RGB).image)
             lo, ln = (np.maximum(f.astype(np.float64) @ luma, 0) for f in (fo, fn))
             row = [metrics.flip(fr, fo), metrics.flip(fr, fn)]
             for r, G in GRID:
