@@ -11,10 +11,11 @@ import pytest
 import torch
 
 from deep_factory import random_deep
+from test_aov import exact_groups, sums
 from ranad_core import lightmatch
 from ranad_core.channels import EMISSION, RGB, detect
 from ranad_core.denoise import denoise_window
-from ranad_core.exr import read_deep
+from ranad_core.exr import read_deep, write_deep
 from ranad_core.model import RaNAD, feature_dim, get_config
 from ranad_core.model.prior import LUMA
 
@@ -119,3 +120,42 @@ def test_the_command_line_switch(prior_model, tmp_path):
     b = outs["--no-light-match"].columns(list(RGB))
     assert np.abs(a - b).max() > 1e-4 * np.abs(b).max()
     np.testing.assert_array_equal(outs["--light-match"].channel("A"), outs["--no-light-match"].channel("A"))
+
+
+def test_the_cache_carries_the_gain_and_a_wrong_one_is_refused(prior_model, tmp_path):
+    """`ranad denoise --cache` keeps the gains (none with --no-light-match) and `ranad aov` applies them, so the
+    light groups sum to the denoised beauty either way; a cache whose gains do not fit the frame is refused with
+    exit 2 and no output."""
+    import json
+
+    from click.testing import CliRunner
+    from safetensors.numpy import save_file as save_np
+    from safetensors.torch import save_file
+
+    from ranad_cli.main import cli
+    from ranad_core import cache as cache_io
+
+    model = tmp_path / "m.safetensors"
+    save_file({k: v.contiguous() for k, v in prior_model.state_dict().items()}, str(model),
+              metadata={"model_config": json.dumps(prior_model.config.to_dict())})
+    src = tmp_path / "b.exr"
+    write_deep(src, exact_groups(read_deep(SHOT / "noisy_spp16.0001.exr")))   # groups that sum exactly to R, G, B
+    run = lambda *a: CliRunner().invoke(cli, [str(x) for x in a])  # noqa: E731
+    for flag, has_gain in (("--light-match", True), ("--no-light-match", False)):
+        out, cdir = tmp_path / f"d{flag}.exr", tmp_path / f"c{flag}"
+        r = run("denoise", src, "-o", out, "--model", model, "--cache", cdir, flag)
+        assert r.exit_code == 0, r.output
+        cpath = next(cdir.glob("*.ranadcache"))
+        tensors, meta = cache_io.read_cache(str(cpath))
+        assert ("gain" in tensors) == has_gain
+        r = run("aov", cpath, "--layers", "lg_*", "-o", tmp_path / f"a{flag}.exr")
+        assert r.exit_code == 0, r.output
+        (lg, _), (_, rgb) = sums(read_deep(tmp_path / f"a{flag}.exr")), sums(read_deep(out))
+        assert np.abs(lg - rgb).max() < 1e-5 * np.abs(rgb).max()
+    tensors["gain"] = np.ones(7, np.float32)           # a gain map of another frame's size, checksum made to fit
+    meta["tensors_crc32"] = cache_io.tensors_checksum(tensors)
+    bad = tmp_path / "bad.ranadcache"
+    save_np(tensors, str(bad), metadata=meta)
+    r = run("aov", bad, "--layers", "lg_*", "-o", tmp_path / "bad.exr")
+    assert r.exit_code == 2 and "light-matching gains do not match" in r.output and str(bad) in r.output
+    assert not (tmp_path / "bad.exr").exists()
