@@ -75,12 +75,13 @@ def frame_gain(srt: DeepImage, outs: dict, radius: int = RADIUS, clamp: float = 
     alpha = np.clip(outs["alpha"][:, 0], 0, 1) if "alpha" in outs else np.clip(srt.channel(ALPHA), 0, 1)
     lum = denoised_luminance(outs)
     if all(c in srt.channels for c in EMISSION):   # emission passes through the model, but it is light in the frame
-        lum += srt.columns(EMISSION) @ LUMA.astype(np.float32)
+        for name, weight in zip(EMISSION, LUMA):
+            lum += weight * srt.channel(name)
     current = flat_luminance(lum, alpha, srt.offsets, h, w)
-    first = srt.offsets[:-1]
     has = np.diff(srt.offsets) > 0
-    target = np.zeros(h * w)
-    target[has] = srt.columns(PRIOR)[first[has]].astype(np.float64) @ LUMA
+    target = np.zeros(h * w)   # the prior is the same on every bin of a pixel: read it from the first
+    rows = srt.offsets[:-1][has]
+    target[has] = srt.values[np.ix_(rows, [srt.channels.index(c) for c in PRIOR])].astype(np.float64) @ LUMA
     return pixel_gain(target.reshape(h, w), current, radius, clamp).reshape(-1)
 
 

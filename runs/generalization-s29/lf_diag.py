@@ -4,7 +4,6 @@ box_R(L_ranad) (luminance, clamped to [1/G, G]) and of ranad times the same rati
 A per-pixel gain keeps every bin a (scaled) combination of the noisy values, so AOV reuse and sums stay exact.
 Usage: python lf_diag.py SET [MODEL|-] [G]   (G: the clamp, default 1.5; - for the default model)"""
 import sys
-from pathlib import Path
 import collections
 import numpy as np
 from ranad_core.exr import read_deep
@@ -15,8 +14,7 @@ from ranad_core.train.data import find_pairs
 from ranad_core.model.store import load_model
 from ranad_core.model.prior import LUMA
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "generalization-s26"))
-from ev_gain import box  # noqa: E402  (summed-area box mean)
+from ranad_core.lightmatch import box_mean as box  # the product's summed-area box mean
 
 model = load_model(sys.argv[2] if len(sys.argv) > 2 and sys.argv[2] != "-" else None).model
 luma = np.asarray(LUMA, np.float64)

@@ -5,7 +5,6 @@ spp. With --rgb first: a gain per RGB channel on top of ranad's light matching (
 Usage: python lf_grid.py [--rgb] OUT.jsonl SET... """
 import sys
 import json
-from pathlib import Path
 import collections
 import numpy as np
 from ranad_core.exr import read_deep
@@ -16,8 +15,7 @@ from ranad_core.train.data import find_pairs
 from ranad_core.model.store import load_model
 from ranad_core.model.prior import LUMA
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "generalization-s26"))
-from ev_gain import box  # noqa: E402  (summed-area box mean)
+from ranad_core.lightmatch import box_mean as box  # the product's summed-area box mean
 
 RGB = sys.argv[1] == "--rgb"
 args = sys.argv[2:] if RGB else sys.argv[1:]
