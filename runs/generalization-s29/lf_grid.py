@@ -1,7 +1,8 @@
 """Diagnostic (session 29): ranad's flat image times a clamped low-frequency luminance gain toward flat OIDN's,
 g = clip(box_R(L_oidn) / box_R(L_ranad), 1/G, G), over a grid of (R, G). Flat FLIP per spp as a ratio to flat
 OIDN's, mean over a set's deep-Z pairs, of ranad without its own light matching. Writes one JSON line per set and
-spp. With --rgb first: a gain per RGB channel on top of ranad's light matching (the default since this session).
+spp. With --rgb first: a gain per RGB channel on top of ranad's light matching (the default since this session);
+with --noisy first: the noisy input's flat luminance as the target instead of OIDN's (no light matching).
 Usage: python lf_grid.py [--rgb] OUT.jsonl SET... """
 import sys
 import json
@@ -17,8 +18,8 @@ from ranad_core.model.prior import LUMA
 
 from ranad_core.lightmatch import box_mean as box  # the product's summed-area box mean
 
-RGB = sys.argv[1] == "--rgb"
-args = sys.argv[2:] if RGB else sys.argv[1:]
+RGB, NOISY = sys.argv[1] == "--rgb", sys.argv[1] == "--noisy"
+args = sys.argv[2:] if RGB or NOISY else sys.argv[1:]
 model = load_model(None).model
 luma = np.asarray(LUMA, np.float64)
 GRID = [(r, g) for r in (4, 8, 16, 32) for g in (1.02, 1.03, 1.05)]
@@ -29,10 +30,11 @@ with open(args[0], "a") as out:
             if p.kind != "deepz":
                 continue
             noisy, ref = read_deep(p.noisy), read_deep(p.reference)
-            fr, fo = metrics.flat_rgb(ref), oidn_flat(noisy)
+            fr, oidn = metrics.flat_rgb(ref), oidn_flat(noisy)
+            fo = metrics.flat_rgb(noisy) if NOISY else oidn   # the target (OIDN's FLIP stays the divisor)
             fn = metrics.flat_rgb(denoise_window(model, [noisy], 0, light_match=RGB).image)
             lo, ln = (np.maximum(f.astype(np.float64) @ luma, 0) for f in (fo, fn))
-            row = [metrics.flip(fr, fo), metrics.flip(fr, fn)]
+            row = [metrics.flip(fr, oidn), metrics.flip(fr, fn)]
             for r, G in GRID:
                 if RGB:
                     g = np.stack([np.clip(box(np.maximum(fo[..., c], 0).astype(np.float64), r) / np.maximum(
@@ -43,7 +45,7 @@ with open(args[0], "a") as out:
             acc[p.spp].append(row)
         for spp in sorted(acc):
             m = np.mean(acc[spp], axis=0)
-            rec = {"set": s, "spp": spp, "rgb": RGB, "ranad": m[1] / m[0],
+            rec = {"set": s, "spp": spp, "rgb": RGB, "noisy": NOISY, "ranad": m[1] / m[0],
                    **{f"R{r}G{g}": x / m[0] for (r, g), x in zip(GRID, m[2:])}}
             out.write(json.dumps(rec) + "\n")
             out.flush()
