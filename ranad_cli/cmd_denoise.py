@@ -81,9 +81,9 @@ def parse_bytes(text: str) -> float:
 @click.option("--light-match/--no-light-match", "light_match", default=True, show_default=True,
               help=f"Models on the flat prior: each pixel's denoised colour times a gain within "
                    f"{100 * (LIGHT_CLAMP - 1):.0f}% of 1 that brings the local light (a {2 * LIGHT_RADIUS + 1}x"
-                   f"{2 * LIGHT_RADIUS + 1}-pixel mean of luminance) to flat OIDN's, which holds the light of "
-                   "smooth, bounce-lit regions better; the same gain goes to the AOVs (light groups still sum "
-                   "to the beauty).")
+                   f"{2 * LIGHT_RADIUS + 1}-pixel mean of luminance) to the noisy render's own, undoing the slight "
+                   "dimming of smooth regions that averaging kernels leave; the same gain goes to the AOVs (light "
+                   "groups still sum to the beauty).")
 @click.option("--tile", type=click.IntRange(16), default=None,
               help="Tile size in pixels (default: the tiling that fits --max-memory with the fewest bins "
                    "computed twice in the halos; on the CPU, windows of at most 0.8 M bins).")

@@ -43,7 +43,7 @@ from .params import FiniteFloat, int_list
 @click.option("--dark-radius", "dark_radius", type=click.IntRange(0, 8), default=None,
               help="ranad's black neighbourhoods, as `ranad denoise --dark-radius` (default: its default; 0: off).")
 @click.option("--light-match/--no-light-match", "light_match", default=True, show_default=True,
-              help="ranad's light matching to the flat prior, as `ranad denoise --light-match`.")
+              help="ranad's light matching to the noisy render's local light, as `ranad denoise --light-match`.")
 def eval_cmd(dataset, out, model, spp, kinds, scenes, grid_pairs, temporal, cross_model, window, held_out,
              exposures, bin_merge, dark_radius, light_match):
     """Evaluate on DATASET (the output of `ranad synth` with other seeds than the training data): for every

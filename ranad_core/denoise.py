@@ -309,7 +309,7 @@ def denoise_window(model, images: list, centre: int, mapping: ChannelMap | None 
     this relative depth gap are denoised as one and shared back (binmerge; None: its default, 0: off).
     `dark_radius`: the radius of darkness' black windows: bins of exactly black windows and of holdout objects keep
     their colour, 0 (None: its default, 0: off). `light_match`: models on the flat prior bring each region's light
-    within 2% of the prior's (lightmatch.py; False: off).
+    within 2% of the noisy render's own (lightmatch.py; False: off).
 
     Tiles run where the model is (`model.to("cuda")`: `ranad denoise --device cuda`), and so does the flat prior's
     OIDN; inputs are prepared and outputs assembled on the CPU."""

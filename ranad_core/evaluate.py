@@ -110,7 +110,7 @@ def evaluate(dataset: str, model, spps=None, kinds=None, max_scenes: int | None 
     rendered brighter or darker. held_out: scene families (synth presets) the model never trained on; rows get
     group "held-out" for them and "in-family" otherwise (the generalization protocol). merge_gap: ranad's
     thin-bin merging (binmerge; None: its default, 0: off); dark_radius: its black neighbourhoods (darkness; None:
-    its default, 0: off); light_match: its light matching to the flat prior (lightmatch)."""
+    its default, 0: off); light_match: its light matching to the noisy render's local light (lightmatch)."""
     pairs = [p for p in find_pairs(dataset) if (not spps or p.spp in spps) and (not kinds or p.kind in kinds)]
     if max_scenes:
         keep = sorted({p.scene for p in pairs})[:max_scenes]

@@ -1,10 +1,13 @@
 """Light matching: the denoised colour of each pixel times a gain close to 1 that brings the local light of ranad's
-flattened image (a box mean of luminance) to that of the flat prior (flat OIDN's denoised beauty).
+flattened image (a box mean of luminance) to that of the noisy render itself.
 
-Why (runs/generalization-s29): on box-filtered held-out interiors ranad trailed flat OIDN's HDR-FLIP by smooth
-low-frequency blotches and about 1% lost light (runs/generalization-s28, section 1), while OIDN's low frequencies
-there are right. Elsewhere (fog, glass, Gaussian-filtered renders) OIDN's are the worse ones, so the gain is held
-within [1 / CLAMP, CLAMP]: a small local correction of the light, never a copy of OIDN's image.
+Why (runs/generalization-s29): a denoised pixel is a weighted average of noisy neighbours, and where the kernels
+lean towards darker samples a region comes out slightly dark: on box-filtered held-out interiors ranad trailed flat
+OIDN's HDR-FLIP by smooth low-frequency blotches and about 1% lost light (runs/generalization-s28, section 1). The
+noisy render's mean over a wide box is an unbiased estimate of the true local light, so each pixel's gain is the
+ratio of that mean to ranad's own (33x33 pixels), held within [1 / CLAMP, CLAMP]: the noise of the estimate, and its
+fireflies, can move nothing by more than 2%. (Flat OIDN's light as the target, the first version, measured 0.4%
+worse: it is biased where OIDN is, in fog and through Gaussian pixel filters; study section 5.)
 
 The gain is one number per pixel and multiplies every denoised bin of the pixel (the diffuse and specular layers
 and the residual the model denoises with the diffuse; not the emission, which passes through). So every output
@@ -17,11 +20,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from .channels import ALPHA, EMISSION, PRIOR
+from .channels import ALPHA, EMISSION, FLAT_NOISY
 from .deep import DeepImage, transmittance
 from .model.prior import LUMA
 
-RADIUS = 8      # box half-width in pixels: a (2R + 1)^2 window
+RADIUS = 16     # box half-width in pixels: a (2R + 1)^2 window
 CLAMP = 1.02    # gains kept within [1 / CLAMP, CLAMP]
 
 
@@ -69,8 +72,8 @@ def flat_luminance(lum: np.ndarray, alpha: np.ndarray, offsets: np.ndarray, heig
 
 def frame_gain(srt: DeepImage, outs: dict, radius: int = RADIUS, clamp: float = CLAMP) -> np.ndarray:
     """float32 [H * W]: the gain of every pixel of a denoised frame. `srt`: the frame as the model read it (bins in
-    depth order, the flat prior's channels attached: prior.with_prior); `outs`: the model's outputs in that bin
-    order (name -> [N, C]; the denoised alpha where there is one)."""
+    depth order, with the flat prior's channels, which include the pixel's flattened noisy beauty: prior.with_prior);
+    `outs`: the model's outputs in that bin order (name -> [N, C]; the denoised alpha where there is one)."""
     h, w = srt.height, srt.width
     alpha = np.clip(outs["alpha"][:, 0], 0, 1) if "alpha" in outs else np.clip(srt.channel(ALPHA), 0, 1)
     lum = denoised_luminance(outs)
@@ -79,9 +82,9 @@ def frame_gain(srt: DeepImage, outs: dict, radius: int = RADIUS, clamp: float = 
             lum += weight * srt.channel(name)
     current = flat_luminance(lum, alpha, srt.offsets, h, w)
     has = np.diff(srt.offsets) > 0
-    target = np.zeros(h * w)   # the prior is the same on every bin of a pixel: read it from the first
+    target = np.zeros(h * w)   # the flat noisy beauty is the same on every bin of a pixel: read it from the first
     rows = srt.offsets[:-1][has]
-    target[has] = srt.values[np.ix_(rows, [srt.channels.index(c) for c in PRIOR])].astype(np.float64) @ LUMA
+    target[has] = srt.values[np.ix_(rows, [srt.channels.index(c) for c in FLAT_NOISY])].astype(np.float64) @ LUMA
     return pixel_gain(target.reshape(h, w), current, radius, clamp).reshape(-1)
 
 

@@ -40,7 +40,7 @@ class ShotOptions:
     keep_depth: bool = False                         # write the input's depths, not denoised ones
     bin_merge: float | None = None                   # binmerge gap (None: its default; 0: off)
     dark_radius: int | None = None                   # darkness radius (None: its default; 0: off)
-    light_match: bool = True                         # lightmatch: local light within 2% of the flat prior's
+    light_match: bool = True                         # lightmatch: local light within 2% of the noisy render's
     cache_dir: str | None = None
     skip_existing: bool = False
     strict: bool = False                             # non-finite samples, negative depths: error instead of fix

@@ -80,7 +80,7 @@ def test_only_the_denoised_colour_moves_and_by_its_pixels_gain(prior_model):
     off = denoise_window(prior_model, [img], 0, light_match=False)
     assert off.gain is None and on.gain is not None and on.gain.shape == (img.width * img.height,)
     assert (on.gain >= 1 / lightmatch.CLAMP - 1e-6).all() and (on.gain <= lightmatch.CLAMP + 1e-6).all()
-    assert np.abs(on.gain - 1).max() > 1e-3               # an untrained model's light differs from OIDN's
+    assert np.abs(on.gain - 1).max() > 1e-3               # an untrained model's light differs from the input's
     m = detect(img)
     ch = on.image.channels
     colour = [ch.index(c) for c in m.beauty]
