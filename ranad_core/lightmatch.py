@@ -6,8 +6,9 @@ lean towards darker samples a region comes out slightly dark: on box-filtered he
 OIDN's HDR-FLIP by smooth low-frequency blotches and about 1% lost light (runs/generalization-s28, section 1). The
 noisy render's mean over a wide box is an unbiased estimate of the true local light, so each pixel's gain is the
 ratio of that mean to ranad's own (33x33 pixels), held within [1 / CLAMP, CLAMP]: the noise of the estimate, and its
-fireflies, can move nothing by more than 2%. (Flat OIDN's light as the target, the first version, measured 0.4%
-worse: it is biased where OIDN is, in fog and through Gaussian pixel filters; study section 5.)
+fireflies, can move nothing by more than 2%. (Flat OIDN's light as the target, the first version, scored the same
+within 0.2% in the held-out means and 0.4% worse in a bare grid; it is biased where OIDN is, in fog and through
+Gaussian pixel filters, and on renders unlike OIDN's training data; study section 5.)
 
 The gain is one number per pixel and multiplies every denoised bin of the pixel (the diffuse and specular layers
 and the residual the model denoises with the diffuse; not the emission, which passes through). So every output
