@@ -10,20 +10,10 @@ import numpy as np
 import ranad_core.evaluate as ev
 from ranad_core import metrics
 from ranad_core.baselines import oidn_flat
+from ranad_core.lightmatch import box_mean as box   # the summed-area box mean
 from ranad_core.model.prior import LUMA
 
 real = ev.denoise_window
-
-
-def box(x: np.ndarray, r: int) -> np.ndarray:
-    """Mean over a (2r+1)^2 box, the box cut at the frame's edges (summed-area table)."""
-    h, w = x.shape
-    s = np.zeros((h + 1, w + 1))
-    s[1:, 1:] = x.cumsum(0).cumsum(1)
-    y0, y1 = np.clip(np.arange(h) - r, 0, h), np.clip(np.arange(h) + r + 1, 0, h)
-    x0, x1 = np.clip(np.arange(w) - r, 0, w), np.clip(np.arange(w) + r + 1, 0, w)
-    tot = s[y1][:, x1] - s[y0][:, x1] - s[y1][:, x0] + s[y0][:, x0]
-    return tot / ((y1 - y0)[:, None] * (x1 - x0)[None, :])
 
 
 def gained(model, images, centre, R: int = 1, G: float = 4.0, **kw):

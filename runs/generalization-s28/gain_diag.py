@@ -3,7 +3,6 @@ help? Flat FLIP over a set's deep-Z pairs per spp, as a ratio to flat OIDN's, of
 global gain (reference light / ranad light); ranad times g = box_R(L_noisy) / box_R(L_ranad) (clamped to [1/G, G]),
 for several R. Usage: python gain_diag.py SET [MODEL]"""
 import sys
-from pathlib import Path
 import collections
 import numpy as np
 from ranad_core.exr import read_deep
@@ -13,9 +12,8 @@ from ranad_core.denoise import denoise_window
 from ranad_core.train.data import find_pairs
 from ranad_core.model.store import load_model
 from ranad_core.model.prior import LUMA
+from ranad_core.lightmatch import box_mean as box   # the summed-area box mean
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "generalization-s26"))
-from ev_gain import box  # noqa: E402  (the same summed-area box mean)
 
 model = load_model(sys.argv[2] if len(sys.argv) > 2 else None).model
 luma = np.asarray(LUMA, np.float64)
