@@ -26,7 +26,7 @@ for p in find_pairs([sys.argv[1]]):
         continue
     noisy, ref = read_deep(p.noisy), read_deep(p.reference)
     fr, fo = metrics.flat_rgb(ref), oidn_flat(noisy)
-    fn = metrics.flat_rgb(denoise_window(model, [noisy], 0).image)
+    fn = metrics.flat_rgb(denoise_window(model, [noisy], 0, light_match=False).image)   # as before lightmatch
     lo, ln = (np.maximum(f.astype(np.float64) @ luma, 0) for f in (fo, fn))
     row = [metrics.flip(fr, fo), metrics.flip(fr, fn)]
     for r in RS:
