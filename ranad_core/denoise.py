@@ -324,7 +324,7 @@ def denoise_window(model, images: list, centre: int, mapping: ChannelMap | None 
 
 
 def _denoise_window(model, images, centre, mapping, tile, halo, keep_noisy, want_embeddings, progress, flows,
-                    priors, keep_depth, device, merge_gap, dark_radius, light_match=True) -> FrameResult:
+                    priors, keep_depth, device, merge_gap, dark_radius, light_match) -> FrameResult:
     from .motion import compensate
 
     cross = is_cross_frame(model)
