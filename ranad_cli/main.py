@@ -23,6 +23,10 @@ os.environ.setdefault("THP_MEM_ALLOC_ENABLE", "1")
 # (`ranad denoise F --profile`, F from bench/denoise.py --frame) 30.0 s against 28.0 s. Read when numpy is first
 # imported, so set here, before anything imports it; a user's own setting wins.
 os.environ.setdefault("NUMPY_MADVISE_HUGEPAGE", "0")
+# numpy's BLAS (OpenBLAS; torch has its own) serves only small products here ([N, 3] colours times luminance
+# weights), yet its threads busy-wait after each one on the cores torch's threads need: 2% of a denoise's samples
+# (perf, the 512x512 crop of bench/denoise.py's frame). One thread: no pool to spin. Read when numpy loads.
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 
 from ranad_core import heap  # noqa: E402

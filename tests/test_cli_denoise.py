@@ -115,6 +115,27 @@ def test_threads_sets_torchs_threads_for_the_run(tmp_path, model_file, keep_torc
     assert r.exit_code == 2 and "--threads" in r.output and not (tmp_path / "t0.exr").exists()
 
 
+def test_the_cycle_collector_skips_what_was_loaded_and_thaws_afterwards(tmp_path, model_file, monkeypatch):
+    """The denoise freezes the objects alive once the model is loaded (so the collector's passes during the tiles
+    skip them) and thaws them when the command ends, so a caller in the same process (this one) collects as
+    before."""
+    import gc
+
+    seen = []
+    real = shot_mod.denoise_window
+
+    def spy(*a, **k):
+        seen.append(gc.get_freeze_count())
+        return real(*a, **k)
+
+    monkeypatch.setattr(shot_mod, "denoise_window", spy)
+    assert gc.get_freeze_count() == 0
+    r = run("denoise", FRAME, "-o", tmp_path / "g.exr", "--model", model_file)
+    assert r.exit_code == 0, r.output
+    assert len(seen) == 1 and seen[0] > 10_000   # torch alone is tens of thousands of objects
+    assert gc.get_freeze_count() == 0
+
+
 def spy_on_tile_choice(monkeypatch) -> list:
     """Records (budget, tile) of every tile choice shot.py makes (the real choice still decides)."""
     calls = []

@@ -85,3 +85,36 @@ def test_command_line_turns_numpys_huge_pages_off_unless_the_user_set_it(user):
         env["NUMPY_MADVISE_HUGEPAGE"] = user
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, check=True)
     assert out.stdout.strip() == ("1" if user == "1" else "0")
+
+
+OPENBLAS_THREADS_PROBE = """
+import ctypes, sys
+import ranad_cli.main, numpy  # noqa: F401 (numpy's OpenBLAS reads OPENBLAS_NUM_THREADS when it loads)
+paths = {line.split()[-1] for line in open('/proc/self/maps') if 'openblas' in line.split()[-1]}
+for path in sorted(paths):
+    lib = ctypes.CDLL(path)
+    for name in ('scipy_openblas_get_num_threads64_', 'scipy_openblas_get_num_threads', 'openblas_get_num_threads64_',
+                 'openblas_get_num_threads'):
+        if hasattr(lib, name):
+            print(getattr(lib, name)())
+            sys.exit(0)
+print('none')
+"""
+
+
+@pytest.mark.parametrize("user", [None, "2"])
+def test_command_line_gives_numpys_blas_one_thread_unless_the_user_set_it(user):
+    """ranad_cli.main sets OPENBLAS_NUM_THREADS=1 before numpy loads its BLAS (whose idle threads otherwise spin on
+    the cores torch's threads need); a user's own setting wins. Asked of the loaded OpenBLAS itself."""
+    import os
+
+    if not sys.platform.startswith("linux"):
+        pytest.skip("reads /proc/self/maps (Linux only)")
+    env = {k: v for k, v in os.environ.items() if k != "OPENBLAS_NUM_THREADS"}
+    if user is not None:
+        env["OPENBLAS_NUM_THREADS"] = user
+    out = subprocess.run([sys.executable, "-c", OPENBLAS_THREADS_PROBE], capture_output=True, text=True, env=env,
+                         check=True).stdout.strip()
+    if out == "none":
+        pytest.skip("this numpy is not built on OpenBLAS (nothing to limit)")
+    assert int(out) == (int(user) if user else 1)
