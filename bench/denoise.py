@@ -47,9 +47,11 @@ print(json.dumps({"seconds": time.perf_counter() - t, "peak_mb": peak, "code": c
 
 
 def run_measured(code: str, *args: str, threads: int) -> dict:
-    # the baselines run under the numpy page policy ranad's command line sets for itself (ranad_cli/main.py)
+    # the baselines run under the numpy page and BLAS-thread policy ranad's command line sets for itself
+    # (ranad_cli/main.py)
     env = dict(os.environ, OMP_NUM_THREADS=str(threads),
-               NUMPY_MADVISE_HUGEPAGE=os.environ.get("NUMPY_MADVISE_HUGEPAGE", "0"))
+               NUMPY_MADVISE_HUGEPAGE=os.environ.get("NUMPY_MADVISE_HUGEPAGE", "0"),
+               OPENBLAS_NUM_THREADS=os.environ.get("OPENBLAS_NUM_THREADS", "1"))
     p = subprocess.run([sys.executable, "-c", RUNNER, code, *args], capture_output=True, text=True, env=env, cwd=ROOT)
     last = [ln[ln.index('{"seconds"'):] for ln in p.stderr.splitlines() if '{"seconds"' in ln]  # after tqdm's codes
     if p.returncode or not last:
