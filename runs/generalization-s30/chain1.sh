@@ -8,6 +8,6 @@
 ( time OMP_NUM_THREADS=2 ranad train $T16_POOL -o $R/cpu-small-pdl-gza-d4fl-t1 --config cpu-small-pdl-gza-d4 \
     --steps 2000 --lr 1e-4 --seed 28 $T16_OPTS --init s28/v7_d4_init.safetensors --loss-weight flip=2 \
     ) >> $S/train_d4fl.log 2>&1
-# (stopped by hand after the first five sets: every figure within 0.2-1% of fl-t1's; README section 1)
+# (stopped by hand during the fifth set: the first four within 0.2-1.4% of fl-t1's; README section 1)
 for s in $HELDOUT9; do evn d4fl $s $R/cpu-small-pdl-gza-d4fl-t1/checkpoint.pt; done
 touch $S/chain1.done
