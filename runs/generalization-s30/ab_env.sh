@@ -1,7 +1,7 @@
 #!/bin/bash
 # session 30: alternating whole-process timings of a 512x512 crop of bench/denoise.py's synth frame (its
-# make_1080p, then tile_to 512x512): numpy's BLAS on two threads (as before), on one (the new default), and on one with the cycle
-# collector off (gc.disable, the stand-in that was timed for the gc.freeze adopted)
+# make_1080p, then tile_to 512x512): numpy's BLAS on two threads (as before), on one (the new default), and on one
+# with the cycle collector off (gc.disable, the stand-in that was timed for the gc.freeze adopted)
 cd /work/data/s30/frame && . /work/main/.venv/bin/activate
 for i in 1 2 3 4 5; do
   for v in blas2 blas1 gcoff; do
