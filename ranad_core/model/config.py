@@ -190,6 +190,10 @@ CONFIGS["cpu-small-pdl-gza-d4"] = ModelConfig(**{**CONFIGS["cpu-small-pdl-gza"].
 CONFIGS["cpu-small-pdl-gza-u1"] = ModelConfig(**{**CONFIGS["cpu-small-pdl-gza"].__dict__,
                                                 "name": "cpu-small-pdl-gza-u1", "unets": 1})
 
+# cpu-small-pdl-gza with a third U-Net, the other way of issue 24's item 6 (capacity): grown from a two-U-Net model
+# with the new U-Net starting as the identity (runs/generalization-s30/grow_unet.py) and fine-tuned
+CONFIGS["cpu-small-pdl-gza-u3"] = ModelConfig(**{**CONFIGS["cpu-small-pdl-gza"].__dict__,
+                                                "name": "cpu-small-pdl-gza-u3", "unets": 3})
 
 def get_config(name: str) -> ModelConfig:
     try:
