@@ -195,6 +195,7 @@ CONFIGS["cpu-small-pdl-gza-u1"] = ModelConfig(**{**CONFIGS["cpu-small-pdl-gza"].
 CONFIGS["cpu-small-pdl-gza-u3"] = ModelConfig(**{**CONFIGS["cpu-small-pdl-gza"].__dict__,
                                                 "name": "cpu-small-pdl-gza-u3", "unets": 3})
 
+
 def get_config(name: str) -> ModelConfig:
     try:
         return CONFIGS[name]
