@@ -3,8 +3,9 @@
 K * SE / box_R(current)), SE the standard error of the noisy box mean (the box's sample standard deviation over
 sqrt of its pixel count, pixels taken as independent, as in a box-filtered render), instead of within the fixed 2%:
 where the noisy render's local light is well determined ranad's may move further toward it (glass_light.py: a glass
-scene losing 2.4% of its light keeps 0.3%). Not the product's code.
-Usage: python se_clamp_eval.py K SET OUT   (from the data folder)"""
+scene 2.9% short of the reference's light over its box means comes within 0.1%). Not the product's code.
+Usage: python se_clamp_eval.py K SET OUT [CAP]   (from the data folder; CAP: the most the gain may move,
+e.g. 0.05; without it a fall is held at 50% and a rise is not bounded)"""
 import sys
 
 import numpy as np
@@ -14,6 +15,7 @@ from ranad_core import lightmatch
 from ranad_core.lightmatch import box_mean
 
 K = float(sys.argv[1])
+CAP = float(sys.argv[4]) if len(sys.argv) > 4 else None   # None: falls held at 50%, rises unbounded
 
 
 def pixel_gain(target, current, radius=lightmatch.RADIUS, clamp=lightmatch.CLAMP):
@@ -27,7 +29,10 @@ def pixel_gain(target, current, radius=lightmatch.RADIUS, clamp=lightmatch.CLAMP
     se = np.sqrt(np.maximum(box_mean(t * t, radius) - bt * bt, 0) / n)
     g = np.divide(bt, bc, out=np.ones_like(bt), where=(bc > 0) & (bt > 0))
     lim = np.maximum(clamp - 1, K * np.divide(se, bc, out=np.zeros_like(se), where=bc > 0))
-    return np.clip(g, 1 - np.minimum(lim, 0.5), 1 + lim).astype(np.float32)
+    if CAP is None:   # as chain5.sh ran
+        return np.clip(g, 1 - np.minimum(lim, 0.5), 1 + lim).astype(np.float32)
+    lim = np.minimum(lim, CAP)
+    return np.clip(g, 1 - lim, 1 + lim).astype(np.float32)
 
 
 lightmatch.pixel_gain = pixel_gain
