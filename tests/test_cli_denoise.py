@@ -97,15 +97,21 @@ def test_readme_shot_with_the_shipped_cross_frame_default_and_reference(tmp_path
     assert after < 0.6 * before, (before, after)
 
 
-def test_threads_sets_torchs_threads_for_the_run(tmp_path, model_file, keep_torch_threads, monkeypatch):
+def spy_on_windows(monkeypatch, probe) -> list:
+    """Records probe() as each window of a shot starts denoising (shot.py's denoise_window, which still runs)."""
     seen = []
     real = shot_mod.denoise_window
 
     def spy(*a, **k):
-        seen.append(torch.get_num_threads())
+        seen.append(probe())
         return real(*a, **k)
 
     monkeypatch.setattr(shot_mod, "denoise_window", spy)
+    return seen
+
+
+def test_threads_sets_torchs_threads_for_the_run(tmp_path, model_file, keep_torch_threads, monkeypatch):
+    seen = spy_on_windows(monkeypatch, torch.get_num_threads)
     for n in (1, 2):
         r = run("denoise", FRAME, "-o", tmp_path / f"t{n}.exr", "--model", model_file, "--threads", n)
         assert r.exit_code == 0, r.output
@@ -121,14 +127,7 @@ def test_the_cycle_collector_skips_what_was_loaded_and_thaws_afterwards(tmp_path
     before."""
     import gc
 
-    seen = []
-    real = shot_mod.denoise_window
-
-    def spy(*a, **k):
-        seen.append(gc.get_freeze_count())
-        return real(*a, **k)
-
-    monkeypatch.setattr(shot_mod, "denoise_window", spy)
+    seen = spy_on_windows(monkeypatch, gc.get_freeze_count)
     assert gc.get_freeze_count() == 0
     r = run("denoise", FRAME, "-o", tmp_path / "g.exr", "--model", model_file)
     assert r.exit_code == 0, r.output
