@@ -51,6 +51,8 @@ def eval_cmd(dataset, out, model, spp, kinds, scenes, grid_pairs, temporal, cros
     are scored against the reference: SMAPE, DSSIM and HDR-FLIP of the flattened beauty; per-bin SMAPE; a
     compositing edit (a layer inserted at the median depth, the foreground recoloured) and a depth separation
     (front and back flattened alone), each compared with the same edit on the reference. Lower is better.
+    Frames with albedo also score OIDN with its guides prefiltered (oidn-clean, OIDN's highest-quality mode) and
+    the recolour from it (recolour-clean); the ratio tables give ranad against both.
     """
     from ranad_core import evaluate as ev
     from ranad_core.exr.flat import write_flat

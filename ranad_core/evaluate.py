@@ -19,11 +19,15 @@ import numpy as np
 
 from . import metrics
 from .baselines import oidn_flat, recolour
+from .channels import ALBEDO
 from .denoise import denoise_window
 from .exr import read_deep
 from .train.data import find_pairs, read_manifest
 
-METHODS = ("noisy", "oidn", "recolour", "ranad")
+METHODS = ("noisy", "oidn", "oidn-clean", "recolour", "recolour-clean", "ranad")
+# the grid's image columns (Result.grid_columns); "oidn-clean" and "recolour-clean" (flat OIDN with prefiltered
+# guides, and the recolour from it) are scored where a frame has albedo, not shown
+GRID_METHODS = ("noisy", "oidn", "recolour", "ranad")
 FLAT = ("smape", "dssim", "flip")
 DEEP = ("bin_smape", "z_rel", "comp_flip", "comp_smape", "sep_smape", "sep_dssim")
 COLUMNS = ("scene", "family", "group", "exposure", "kind", "spp", "ref_spp", "film", "sampler", "method", *FLAT,
@@ -131,6 +135,13 @@ def evaluate(dataset: str, model, spps=None, kinds=None, max_scenes: int | None 
         t = time.perf_counter()
         outputs["recolour"] = recolour(noisy, outputs["oidn"])
         seconds["recolour"] = time.perf_counter() - t + seconds["oidn"]
+        if all(c in noisy.channels for c in ALBEDO):   # OIDN at its best: its guides prefiltered
+            t = time.perf_counter()
+            outputs["oidn-clean"] = oidn_flat(noisy, clean_aux=True)
+            seconds["oidn-clean"] = time.perf_counter() - t
+            t = time.perf_counter()
+            outputs["recolour-clean"] = recolour(noisy, outputs["oidn-clean"])
+            seconds["recolour-clean"] = time.perf_counter() - t + seconds["oidn-clean"]
         t = time.perf_counter()
         outputs["ranad"] = denoise_window(model, [noisy], 0, merge_gap=merge_gap, dark_radius=dark_radius,
                                           light_match=light_match).image
@@ -140,7 +151,7 @@ def evaluate(dataset: str, model, spps=None, kinds=None, max_scenes: int | None 
             outputs = {k: v * np.float32(2.0 ** -stops) if isinstance(v, np.ndarray) else exposed(v, -stops)
                        for k, v in outputs.items()}
         flats = {}
-        for method in METHODS:
+        for method in (m for m in METHODS if m in outputs):
             out = outputs[method]
             deep = not isinstance(out, np.ndarray)
             flats[method] = metrics.flat_rgb(out) if deep else out
@@ -154,7 +165,7 @@ def evaluate(dataset: str, model, spps=None, kinds=None, max_scenes: int | None 
             edits = [metrics.composite_edit(metrics.with_depths_of(x, ref), z)
                      for x in (outputs["recolour"], outputs["ranad"], ref)]
             result.grid.append((f"{pair.scene} ({family}) {pair.kind} {pair.spp} spp {stops:+g} stops",
-                                [flats[m] for m in METHODS] + [flat_ref] + edits))
+                                [flats[m] for m in GRID_METHODS] + [flat_ref] + edits))
         if progress:
             progress(1)
     return result
@@ -210,7 +221,8 @@ def groups(rows: list) -> list:
 
 def _spp_ratios(sel: list, noisy: bool = False) -> list:
     """Per spp of `sel`, means over its rows taken first: n, ranad's flat FLIP / OIDN's and its edit FLIP /
-    OIDN+recolour's, with `noisy` also OIDN's flat FLIP / the noisy input's; an spp lacking a method is left out."""
+    OIDN+recolour's, the same against OIDN with prefiltered guides and the recolour from it (NaN where those were
+    not scored), with `noisy` also OIDN's flat FLIP / the noisy input's; an spp lacking a method is left out."""
     by = {(r["spp"], r["method"]): r for r in summary(sel)}
     needs = ("noisy", "oidn", "recolour", "ranad") if noisy else ("ranad", "oidn")
     out = []
@@ -223,6 +235,9 @@ def _spp_ratios(sel: list, noisy: bool = False) -> list:
             row["oidn_vs_noisy"] = oidn["flip"] / by[(spp, "noisy")]["flip"]
         row["flip_vs_oidn"] = ranad["flip"] / oidn["flip"]
         row["edit_vs_recolour"] = ranad["comp_flip"] / by[(spp, "recolour")]["comp_flip"]
+        clean, clean_edit = by.get((spp, "oidn-clean")), by.get((spp, "recolour-clean"))
+        row["flip_vs_oidn_clean"] = ranad["flip"] / clean["flip"] if clean else math.nan
+        row["edit_vs_recolour_clean"] = ranad["comp_flip"] / clean_edit["comp_flip"] if clean_edit else math.nan
         out.append(row)
     return out
 
@@ -259,13 +274,15 @@ def grouped_markdown(rows: list, title: str = "") -> str:
                                    f"{len({r['scene'] for r in sel})} scenes"))
     rt = ratios(rows)
     if rt:
-        cols = ("group", "exposure", "kind", "spp", "n", "flip_vs_oidn", "edit_vs_recolour")
-        parts += ["### ranad / baseline (flat FLIP vs OIDN, edit FLIP vs OIDN+recolour; < 1: ranad better)", "",
+        cols = ("group", "exposure", "kind", "spp", "n", "flip_vs_oidn", "edit_vs_recolour", "flip_vs_oidn_clean",
+                "edit_vs_recolour_clean")
+        parts += ["### ranad / baseline (flat FLIP vs OIDN, edit FLIP vs OIDN+recolour; _clean: against OIDN with "
+                  "prefiltered guides; < 1: ranad better)", "",
                   "| " + " | ".join(cols) + " |", "|" + "---|" * len(cols)]
         parts += ["| " + " | ".join(_fmt(r[c]) for c in cols) + " |" for r in rt]
     fr = family_ratios(rows)
     if fr:
-        cols = ("family", "spp", "n", "oidn_vs_noisy", "flip_vs_oidn", "edit_vs_recolour")
+        cols = ("family", "spp", "n", "oidn_vs_noisy", "flip_vs_oidn", "edit_vs_recolour", "flip_vs_oidn_clean")
         parts += ["", "### per family (means over kinds and exposures; oidn_vs_noisy: flat OIDN's FLIP / the noisy "
                   "input's)", "", "| " + " | ".join(cols) + " |", "|" + "---|" * len(cols)]
         parts += ["| " + " | ".join(_fmt(r[c]) for c in cols) + " |" for r in fr]

@@ -187,14 +187,43 @@ def test_eval_command_writes_table_csv_and_grid(tmp_path):
     assert r.exit_code == 0, r.output
     assert "| 16 | ranad | 1 |" in r.output and "| 16 | oidn | 1 |" in r.output
     rows = list(csv.DictReader(open(out / "eval.csv")))
-    assert [row["method"] for row in rows] == ["noisy", "oidn", "recolour", "ranad"]
-    noisy, oidn = rows[0], rows[1]
+    # the example has albedo and normal: OIDN with its guides prefiltered, and the recolour from it, are scored too
+    assert [row["method"] for row in rows] == ["noisy", "oidn", "oidn-clean", "recolour", "recolour-clean", "ranad"]
+    noisy, oidn, clean = rows[0], rows[1], rows[2]
     assert float(oidn["flip"]) < float(noisy["flip"])          # OIDN really denoised
+    assert float(clean["flip"]) < float(noisy["flip"]) and clean["flip"] != oidn["flip"]
+    table = (out / "eval.md").read_text()
+    assert "| 16 | oidn-clean | 1 |" in table and "| 16 | recolour-clean | 1 |" in table
     assert 0.5 < float(noisy["light"]) < 2 and "| light |" in (out / "eval.md").read_text()
     assert math.isnan(float(oidn["comp_flip"])) and float(noisy["comp_flip"]) > 0
     assert (out / "grid.png").stat().st_size > 1000 and (out / "eval.md").is_file()
     r = CliRunner().invoke(cli, ["eval", str(ds), "-o", str(out), "--model", str(run), "--spp", "7"])
     assert r.exit_code == 2 and "no pairs match" in r.output
+
+
+@needs_oidn
+def test_oidn_with_prefiltered_guides_denoises_the_guides_first():
+    """oidn_flat(clean_aux=True): OIDN's own filters really denoise a noisy albedo (closer to the clean one than the
+    noisy guide was), the beauty is then denoised from the cleaned guides (not the plain result), and a frame
+    without guides gets plain OIDN."""
+    import pyoidn
+
+    from ranad_core.baselines import oidn_flat, prefiltered
+
+    rng = np.random.default_rng(3)
+    yy, xx = np.mgrid[0:64, 0:64] / 64.0
+    albedo = np.stack([0.2 + 0.6 * (xx > 0.5), 0.3 + 0.4 * yy, np.full_like(xx, 0.5)], -1).astype(np.float32)
+    noisy_albedo = np.clip(albedo + rng.normal(0, 0.15, albedo.shape), 0, 1).astype(np.float32)
+    cleaned = prefiltered(pyoidn, "albedo", noisy_albedo)
+    assert np.abs(cleaned - albedo).mean() < 0.5 * np.abs(noisy_albedo - albedo).mean()
+
+    img = random_deep(32, 24, max_bins=3, seed=5, ids=(), channels=("R", "G", "B", "A", "Z", "albedo.R", "albedo.G",
+                                                                    "albedo.B", "N.X", "N.Y", "N.Z"))
+    plain, clean = oidn_flat(img), oidn_flat(img, clean_aux=True)
+    assert plain.shape == clean.shape == (24, 32, 3) and np.isfinite(clean).all()
+    assert not np.array_equal(plain, clean)
+    bare = random_deep(32, 24, max_bins=3, seed=5, ids=(), channels=("R", "G", "B", "A", "Z"))
+    assert np.array_equal(oidn_flat(bare), oidn_flat(bare, clean_aux=True))
 
 
 def test_eval_names_what_it_cannot_score(tmp_path):

@@ -99,3 +99,21 @@ def test_film_note_flags_frames_whose_noise_flat_oidn_keeps(tmp_path):
     assert render_conditions(scene_manifest(pair)) == ("box", "independent")
     (scene / "manifest.json").write_text(json.dumps({"pixel_filter": ["gaussian", 2.0], "sampler": "sobol"}))
     assert render_conditions(scene_manifest(pair)) == ("gaussian 2", "sobol")
+
+
+def test_ratios_against_oidn_with_prefiltered_guides():
+    """Where the frames were also scored by OIDN with prefiltered guides, the ratio table divides ranad's means by
+    that baseline's (and its recolour's edit); where they were not (frames without albedo), n/a, not a number made
+    up from the plain baseline."""
+    rows = _rows()
+    for r in [r for r in rows if r["group"] == "held-out" and r["method"] in ("oidn", "recolour")]:
+        rows.append({**r, "method": r["method"] + "-clean", "flip": r["flip"] * 0.5,
+                     "comp_flip": r["comp_flip"] * 0.75})
+    rt = {r["group"]: r for r in ratios(rows)}
+    assert rt["held-out"]["flip_vs_oidn_clean"] == pytest.approx(1.6)       # 0.08 / (0.1 * 0.5)
+    assert rt["held-out"]["edit_vs_recolour_clean"] == pytest.approx(0.5 / 0.75)
+    assert rt["held-out"]["flip_vs_oidn"] == pytest.approx(0.8)             # the plain baseline's ratio unchanged
+    assert np.isnan(rt["in-family"]["flip_vs_oidn_clean"])
+    text = grouped_markdown(rows, "t")
+    assert "| held-out | +0 | deepz | 16 | 2 | 0.8000 | 0.5000 | 1.6000 | 0.6667 |" in text
+    assert "| in-family | +0 | deepz | 16 | 2 | 0.5000 | 0.5000 | n/a | n/a |" in text
