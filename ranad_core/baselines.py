@@ -5,8 +5,8 @@
 - flat OIDN with prefiltered guides (OIDN's documented highest-quality mode): the flattened albedo and normal
   denoised first by OIDN's own filters for them, then the beauty with `cleanAux`. At low spp a render's albedo and
   normal are noisy too (texture, edges, glass), and OIDN without prefiltering keeps their noise as detail: on
-  box-filtered held-out interiors this mode scores 6% below plain OIDN's flat FLIP, on glass and layers 7-20%
-  (runs/generalization-s31). It costs three OIDN passes instead of one.
+  box-filtered held-out interiors this mode scores 6% below plain OIDN's flat FLIP, on glass and layers 7-33%, in
+  fog and on Gaussian-filtered interiors 0.5-4% above it (runs/generalization-s31). It costs three OIDN passes.
 - OIDN then recolour (Nuke's DeepRecolor, Arnold's documented workflow): every bin of a pixel gets the flat
   denoised colour in proportion to its share of that pixel's composited colour, so the deep image flattens to
   exactly the OIDN image while foreground and background share one flat correction (FG leaks into BG).
