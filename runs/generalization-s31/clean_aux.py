@@ -4,7 +4,9 @@ ranad's flat prior (`--where prior`), in the flat OIDN baseline (`--where baseli
 
 At 4 spp a box-filtered render's flattened albedo and normal are themselves noisy (texture, edges, glass), and
 OIDN takes their noise for detail. The study asks whether the cleaner aux makes OIDN's prior (which ranad's kernels
-follow at 3-8 px) and the comparator better, and by how much on the held-out sets.
+follow at 3-8 px) and the comparator better, and by how much on the held-out sets. (The evaluations ran with this
+script's own prefiltering, `_filtered`; `ranad eval` has since scored the same baseline itself, through
+`baselines.prefiltered`, as `oidn-clean`.)
 
 With `--remod`, ranad's demodulated diffuse layer is multiplied back by a cleaner albedo than the one it was divided
 by: each bin's albedo times its pixel's gain from the flattened albedo to OIDN's prefiltered one (the division keeps
