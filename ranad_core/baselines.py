@@ -61,22 +61,31 @@ def composite_groups(img: DeepImage, groups: list) -> list:
     return res
 
 
-def prefiltered(pyoidn, name: str, image: np.ndarray) -> np.ndarray:
-    """An auxiliary image ("albedo" or "normal", [H, W, 3]) denoised by OIDN's filter for it: the RT filter with
-    only that image set (OIDN's prefiltering for `cleanAux`)."""
-    image = np.ascontiguousarray(image, np.float32)
-    out = np.empty_like(image)
+def oidn_run(pyoidn, images: dict, what: str, **flags: bool) -> np.ndarray:
+    """OIDN's RT filter on `images` (OIDN's image names -> [H, W, 3], the first one's shape the output's) with the
+    boolean parameters `flags`, on a device and filter released afterwards (pyoidn.denoise keeps them, and the
+    filter's scratch memory, for the life of the process). `what` finishes the error: "OIDN failed {what}: ..."."""
+    images = {k: np.ascontiguousarray(v, np.float32) for k, v in images.items()}
+    out = np.empty_like(next(iter(images.values())))
     with pyoidn.Device() as device:
         device.commit()
         with pyoidn.Filter(device, pyoidn.OIDN_FILTER_TYPE_RT) as flt:
-            flt.set_image(name, image, pyoidn.OIDN_FORMAT_FLOAT3)
-            flt.set_image("output", out, pyoidn.OIDN_FORMAT_FLOAT3)
+            for name, image in (*images.items(), ("output", out)):
+                flt.set_image(name, image, pyoidn.OIDN_FORMAT_FLOAT3)
+            for name, value in flags.items():
+                flt.set_bool(name, value)
             flt.commit()
             flt.execute()
         error = device.get_error()
     if error is not None:
-        raise RanadError(f"OIDN failed prefiltering the {name}: {error}", None)
+        raise RanadError(f"OIDN failed {what}: {error}", None)
     return out
+
+
+def prefiltered(pyoidn, name: str, image: np.ndarray) -> np.ndarray:
+    """An auxiliary image ("albedo" or "normal", [H, W, 3]) denoised by OIDN's filter for it: the RT filter with
+    only that image set (OIDN's prefiltering for `cleanAux`)."""
+    return oidn_run(pyoidn, {name: image}, f"prefiltering the {name}")
 
 
 def oidn_flat(noisy: DeepImage, clean_aux: bool = False) -> np.ndarray:

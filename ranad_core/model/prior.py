@@ -21,7 +21,7 @@ import warnings
 import numpy as np
 
 from ..channels import ALBEDO, DIFFUSE, EMISSION, FLAT_NOISY, NORMAL, PRIOR, PRIOR_NOAUX, RGB, SPECULAR
-from ..baselines import composite_groups
+from ..baselines import composite_groups, oidn_run
 from ..deep import DeepImage
 from ..errors import RanadError
 
@@ -98,21 +98,7 @@ def released_oidn(pyoidn, colour: np.ndarray, aux: dict) -> np.ndarray:
     filter's scratch memory, for the life of the process: about 1.2 GB for a 1080p frame, which would sit beside
     every tile of the frame (and of the shot) and count against --max-memory. Releasing costs about 0.1 s per
     frame; the result is bitwise pyoidn.denoise's."""
-    images = {"color": np.ascontiguousarray(colour, np.float32),
-              **{k: np.ascontiguousarray(v, np.float32) for k, v in aux.items()}}
-    out = np.empty_like(images["color"])
-    with pyoidn.Device() as device:
-        device.commit()
-        with pyoidn.Filter(device, pyoidn.OIDN_FILTER_TYPE_RT) as flt:
-            for name, image in (*images.items(), ("output", out)):
-                flt.set_image(name, image, pyoidn.OIDN_FORMAT_FLOAT3)
-            flt.set_bool("hdr", True)
-            flt.commit()
-            flt.execute()
-        error = device.get_error()
-    if error is not None:
-        raise RanadError(f"OIDN failed on the flat prior: {error}", None)
-    return out
+    return oidn_run(pyoidn, {"color": colour, **aux}, "on the flat prior", hdr=True)
 
 
 def flat_images(srt: DeepImage, rgb: np.ndarray, guides: bool) -> tuple[np.ndarray, np.ndarray]:

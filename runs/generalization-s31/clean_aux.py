@@ -5,8 +5,8 @@ ranad's flat prior (`--where prior`), in the flat OIDN baseline (`--where baseli
 At 4 spp a box-filtered render's flattened albedo and normal are themselves noisy (texture, edges, glass), and
 OIDN takes their noise for detail. The study asks whether the cleaner aux makes OIDN's prior (which ranad's kernels
 follow at 3-8 px) and the comparator better, and by how much on the held-out sets. (The evaluations ran with this
-script's own prefiltering, `_filtered`; `ranad eval` has since scored the same baseline itself, through
-`baselines.prefiltered`, as `oidn-clean`.)
+script's own copies of the OIDN calls, since replaced by `baselines.prefiltered` and `baselines.oidn_run`, which
+make the same calls in the same order; `ranad eval` scores the same baseline itself as `oidn-clean`.)
 
 With `--remod`, ranad's demodulated diffuse layer is multiplied back by a cleaner albedo than the one it was divided
 by: each bin's albedo times its pixel's gain from the flattened albedo to OIDN's prefiltered one (the division keeps
@@ -30,41 +30,15 @@ from ranad_core import baselines  # noqa: E402
 from ranad_core.model import prior  # noqa: E402
 
 
-def _filtered(name: str, image: np.ndarray) -> np.ndarray:
-    """One aux image denoised by OIDN's RT filter with only that image set (OIDN's aux prefiltering)."""
-    image = np.ascontiguousarray(image, np.float32)
-    out = np.empty_like(image)
-    with pyoidn.Device() as device:
-        device.commit()
-        with pyoidn.Filter(device, pyoidn.OIDN_FILTER_TYPE_RT) as flt:
-            flt.set_image(name, image, pyoidn.OIDN_FORMAT_FLOAT3)
-            flt.set_image("output", out, pyoidn.OIDN_FORMAT_FLOAT3)
-            flt.commit()
-            flt.execute()
-    return out
-
-
 def clean_oidn(colour: np.ndarray, albedo=None, normal=None) -> np.ndarray:
     """OIDN (HDR) with prefiltered albedo and normal and cleanAux; without aux, plain OIDN."""
     colour = np.ascontiguousarray(colour, np.float32)
     if albedo is None:
         return np.asarray(pyoidn.denoise(colour, hdr=True), np.float32)
-    aux = {"albedo": _filtered("albedo", albedo)}
+    aux = {"albedo": baselines.prefiltered(pyoidn, "albedo", albedo)}
     if normal is not None:
-        aux["normal"] = _filtered("normal", normal)
-    out = np.empty_like(colour)
-    with pyoidn.Device() as device:
-        device.commit()
-        with pyoidn.Filter(device, pyoidn.OIDN_FILTER_TYPE_RT) as flt:
-            flt.set_image("color", colour, pyoidn.OIDN_FORMAT_FLOAT3)
-            for k, v in aux.items():
-                flt.set_image(k, v, pyoidn.OIDN_FORMAT_FLOAT3)
-            flt.set_image("output", out, pyoidn.OIDN_FORMAT_FLOAT3)
-            flt.set_bool("hdr", True)
-            flt.set_bool("cleanAux", True)
-            flt.commit()
-            flt.execute()
-    return out
+        aux["normal"] = baselines.prefiltered(pyoidn, "normal", normal)
+    return baselines.oidn_run(pyoidn, {"color": colour, **aux}, "with prefiltered guides", hdr=True, cleanAux=True)
 
 
 class _CleanPyoidn:
@@ -98,7 +72,7 @@ def remodulate_with_clean_albedo() -> None:
             alb = np.clip(np.nan_to_num(img.columns(list(ALBEDO))), 0, 1).astype(np.float32)
             (flat,) = composite_groups(img, [(alb, False)])
             h, w = img.height, img.width
-            clean = _filtered("albedo", np.clip(flat, 0, 1).reshape(h, w, 3)).reshape(-1, 3)
+            clean = baselines.prefiltered(pyoidn, "albedo", np.clip(flat, 0, 1).reshape(h, w, 3)).reshape(-1, 3)
             gain = np.clip((np.clip(clean, 0, 1) + inputs.DEMOD_FLOOR) / (flat + inputs.DEMOD_FLOOR), 0.5, 2.0)
             counts = np.diff(img.offsets)
             per_bin = np.repeat(gain, counts, axis=0)
