@@ -43,6 +43,29 @@ def test_ln_linear_is_layer_norm_then_linear(rows, c, outs, with_norm):
         close(a, e)
 
 
+@pytest.mark.parametrize("c", [32, 48, 43])
+def test_layer_norm_does_not_depend_on_where_a_row_falls(c):
+    """The fused LayerNorm's result for a row is the same bit for bit whatever rows come before it and however many
+    follow (tiles of a frame against the whole frame; a faster LayerNorm over groups of rows must keep this), on
+    one thread and two."""
+    g = torch.Generator().manual_seed(c)
+    x = torch.randn(301, c, generator=g) * 5 + 2
+    lw, lb = torch.rand(c, generator=g) + 0.5, torch.randn(c, generator=g)
+    wt, b = torch.eye(c), torch.zeros(c)
+    (whole,) = ext.rows_ln_linear(x, lw, lb, 1e-5, wt, b, [c])
+    close(whole, F.layer_norm(x, (c,), lw, lb, 1e-5))
+    for start in (1, 5, 17, 64, 300):
+        (part,) = ext.rows_ln_linear(x[start:].contiguous(), lw, lb, 1e-5, wt, b, [c])
+        assert torch.equal(part, whole[start:]), start
+    threads = torch.get_num_threads()
+    try:
+        torch.set_num_threads(1)
+        (one,) = ext.rows_ln_linear(x, lw, lb, 1e-5, wt, b, [c])
+    finally:
+        torch.set_num_threads(threads)
+    assert torch.equal(one, whole)
+
+
 @pytest.mark.parametrize("two", [False, True])
 def test_linear_residual(two):
     g = torch.Generator().manual_seed(1)
