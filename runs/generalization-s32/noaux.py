@@ -6,8 +6,8 @@ Usage: python noaux.py SET... (run in the data folder; evaluations in s32/)"""
 import os
 import sys
 
-sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "generalization-s31"))
-from cross import means  # noqa: E402
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from reduced import ratio_cells  # noqa: E402
 
 TAGS = ("v8", "pna2", "pna5")
 
@@ -19,16 +19,7 @@ def main() -> None:
     for s in sys.argv[1:]:
         for kind in ("base", "noaux"):
             for spp in (4, 16):
-                flat, edit = [], []
-                for t in TAGS:
-                    f = f"s32/ev_{t}_red32_{kind}_{spp}_{s}"
-                    if not os.path.exists(f + "/eval.csv"):
-                        flat.append("")
-                        edit.append("")
-                        continue
-                    m = means(f)
-                    flat.append(f"{m[(spp, 'ranad', 'flip')] / m[(spp, 'oidn', 'flip')]:.3f}")
-                    edit.append(f"{m[(spp, 'ranad', 'comp')] / m[(spp, 'recolour', 'comp')]:.3f}")
+                flat, edit = zip(*(ratio_cells(f"s32/ev_{t}_red32_{kind}_{spp}_{s}", spp) for t in TAGS))
                 print(f"| `{s}` | {kind} | {spp} | " + " | ".join(flat) + " | " + " | ".join(edit) + " |")
 
 

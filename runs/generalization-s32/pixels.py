@@ -47,7 +47,8 @@ def main() -> None:
             fr = flip.get(scene, {})
             ratio = f"{fr['ranad'] / fr['oidn']:.3f}" if "ranad" in fr and "oidn" in fr else "n/a"
             print(f"| {scene} | {ratio} | {er[one].mean() / eo[one].mean():.3f} | "
-                  f"{er[multi].mean() / eo[multi].mean():.3f} | {int(multi.sum())} | {er[multi].sum() / er.sum():.2f} |")
+                  f"{er[multi].mean() / eo[multi].mean():.3f} | {int(multi.sum())} | "
+                  f"{er[multi].sum() / er.sum():.2f} |")
 
 
 if __name__ == "__main__":

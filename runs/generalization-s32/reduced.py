@@ -12,25 +12,25 @@ from cross import means  # noqa: E402
 KINDS = ("base", "noaux", "rgbaonly")
 
 
+def ratio_cells(folder: str, spp: int, own: bool = False) -> tuple[str, str]:
+    """(flat FLIP / OIDN's, edit FLIP / recolour's) of the evaluation in `folder` at `spp` as table cells, with
+    ranad's own flat FLIP in brackets when `own`; empty cells where the evaluation is missing. Shared by noaux.py."""
+    if not os.path.exists(folder + "/eval.csv"):
+        return "", ""
+    m = means(folder)
+    r = m[(spp, "ranad", "flip")]
+    flat = f"{r / m[(spp, 'oidn', 'flip')]:.3f}" + (f" ({r:.4f})" if own else "")
+    comp, rc = m.get((spp, "ranad", "comp")), m.get((spp, "recolour", "comp"))
+    return flat, f"{comp / rc:.3f}" if comp and rc else "n/a"
+
+
 def main() -> None:
     print("| set | spp | " + " | ".join(f"{k} flat" for k in KINDS) + " | " + " | ".join(f"{k} edit" for k in KINDS)
           + " |")
     print("|---|---|" + "---|" * 2 * len(KINDS))
     for s in sys.argv[1:]:
         for spp in (4, 16):
-            flat, edit = [], []
-            for k in KINDS:
-                f = f"s32/ev_v8_red32_{k}_{spp}_{s}"
-                if not os.path.exists(f + "/eval.csv"):
-                    flat.append("")
-                    edit.append("")
-                    continue
-                m = means(f)
-                r = m[(spp, "ranad", "flip")]
-                flat.append(f"{r / m[(spp, 'oidn', 'flip')]:.3f} ({r:.4f})")
-                comp = m.get((spp, "ranad", "comp"))
-                rc = m.get((spp, "recolour", "comp"))
-                edit.append(f"{comp / rc:.3f}" if comp and rc else "n/a")
+            flat, edit = zip(*(ratio_cells(f"s32/ev_v8_red32_{k}_{spp}_{s}", spp, own=True) for k in KINDS))
             print(f"| `{s}` | {spp} | " + " | ".join(flat) + " | " + " | ".join(edit) + " |")
 
 
