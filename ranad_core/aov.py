@@ -125,7 +125,7 @@ def denoise_aovs(model, images: list, centre: int, mapping: ChannelMap, layers: 
     gated = bool((model.single if cross else model).config.layer_gate)
     vals, window, centre_groups = [], [], None
     for k, img in enumerate(moved):
-        srt, srt_perm = canonical(img, mapping)[0].sorted()
+        srt, srt_perm = canonical(img, mapping)[0].sorted(copy=False)   # the canonical copy is ours
         if len(srt_perm) != len(perms[k]) or not np.array_equal(srt_perm, perms[k]):
             raise RanadError("the AOV frames do not match the cached bin layout (another render?)", None)
         vals.append(_values(img, mapping, layers, perms[k]))

@@ -179,18 +179,23 @@ class DeepImage:
                              f"{', ...' if len(self.channels) > 12 else ''}): a deep image needs Z for its depth order")
         return self.channels.index("Z"), (self.channels.index("ZBack") if "ZBack" in self.channels else None)
 
-    def sorted(self) -> tuple["DeepImage", np.ndarray]:
+    def sorted(self, copy: bool = True) -> tuple["DeepImage", np.ndarray]:
         """Bins of every pixel ordered front to back by (Z, ZBack), and the permutation that did it.
 
         ZBack defaults to Z when absent; ties keep the input order (stable), which is the OpenEXR definition
         of a sorted pixel. Returns ``(image, perm)`` with ``image.values == self.values[perm]`` (ids too),
         so per-bin results computed on the sorted image go back to the file's order with
         :func:`unsort` (the reader keeps file order so that read/write round trips are exact).
+        ``copy=False``: where every bin is in order already (renderers write sorted files), the image itself
+        comes back, not a copy of its bins: for a caller that owns the image and will not change either one
+        (a 1080p frame's copy is 0.1-0.2 s and its size in fresh memory).
         """
         zi, zbi = self.depth_columns()
         z = self.values[:, zi]
         zb = z if zbi is None else self.values[:, zbi]
         perm = _sort_bins(self.pixel_index(), z, zb)
+        if not copy and _is_identity(perm, self.num_bins):
+            return self, perm
         return gather_bins(self, perm, self.offsets), perm
 
     def measured_state(self) -> str:

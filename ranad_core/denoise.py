@@ -229,7 +229,7 @@ def _model_frame(img: DeepImage, mapping: ChannelMap, features: str = "log1p", p
     if residual is not None:
         residual = np.nan_to_num(residual, nan=0.0, posinf=0.0, neginf=0.0)
     with stage("inputs/sort and prior"):
-        srt, perm = canon.sorted()
+        srt, perm = canon.sorted(copy=False)   # canon is this function's own
         res = residual[perm] if residual is not None else None
         groups = binmerge.groups_of(srt, img, perm, merge_gap)
         if groups is not None:

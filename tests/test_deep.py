@@ -415,6 +415,11 @@ def test_sorted_is_stable_front_to_back_and_unsort_inverts(channels):
     same = unsort(s.values, perm2, copy=False)   # a reader's view where nothing moves; a copy by default
     assert same is s.values and unsort(s.values, perm2) is not s.values
     assert np.array_equal(unsort(s.values, perm, copy=False), img.values)   # a permutation still moves
+    s3, perm3 = s.sorted(copy=False)   # sorted already, for an owner of the image: itself, not a copy
+    assert s3 is s and np.array_equal(perm3, perm2)
+    m, mperm = img.sorted(copy=False)  # out of order: sorted as by default, into new arrays
+    assert np.array_equal(m.values, s.values) and np.array_equal(mperm, perm)
+    assert not np.shares_memory(m.values, img.values)
 
 
 @pytest.mark.parametrize("bad", [np.nan, np.inf, -np.inf])
