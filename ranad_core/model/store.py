@@ -24,7 +24,7 @@ from .inputs import feature_dim
 from .ranad import RaNAD
 
 WEIGHTS_DIR = Path(__file__).resolve().parents[1] / "weights"
-DEFAULT_MODEL = "cpu-small-pdl-gza-v8"       # single frames
+DEFAULT_MODEL = "cpu-small-pdl-gza-v9"       # single frames
 DEFAULT_CROSS_MODEL = "cpu-small-pdl-gza-xg-v8"  # sequences: frames with neighbours
 
 
