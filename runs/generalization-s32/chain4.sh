@@ -10,14 +10,8 @@ syn train_g31_sub --scenes 12 --spp 4,16,64,128 --seed 31 --preset exterior --pr
     --sampler stratified --pixel-filter gaussian --filter-width 1.5:4
 syn train_g30_sub --scenes 12 --spp 16,64,128 --seed 30 --preset easy --preset medium --preset deep-heavy \
     --preset studio --preset thin --preset textured --sampler stratified --pixel-filter gaussian --filter-width 1.5:4
-RECIPE="train_g35_boxsob train_g35_boxsob train_g33_win train_g31_sub train_g30_sub --config cpu-small-pdl-gza
-    --steps 1000 --crop 64 --lr 1e-4 --seed 28 --init cpu-small-pdl-gza-v8 --loss-weight alpha=2
-    --loss-weight separation=1 --loss-weight flip=2 --checkpoint-every 200 --spp-weight 4=2 --spp-weight 64=2
-    --spp-weight 128=2 --rotate-normals 0.5"
 for t in pna5 pna2; do
-  p=0.${t#pna}
-  [ -f $S/$t-t1.done ] || { ( time ranad train $RECIPE --p-no-aux $p -o $R/cpu-small-pdl-gza-$t-t1 ) \
-      > $S/train_$t-t1.log 2>&1 && touch $S/$t-t1.done; }
+  trn $t-t1 $V8_POOL $V8_OPTS --steps 1000 --crop 64 --p-no-aux 0.${t#pna}
 done
 for s in heldout_g1int8_box heldout_g1int8 heldout_g1sg8_boxsob; do
   for spp in 4 16; do

@@ -3,14 +3,8 @@
 # on: v8 + 1000 steps of its recipe at --crop 128 (c128f-t1) against the same at --crop 64 (c64f-t1: session 32's
 # pna2-t1 trained again, whose checkpoint was not kept), both scored on the six held-out sets of session 32.
 . "$(dirname "${BASH_SOURCE[0]}")/common.sh"
-RECIPE="train_g35_boxsob train_g35_boxsob train_g33_win train_g31_sub train_g30_sub --config cpu-small-pdl-gza
-    --steps 1000 --lr 1e-4 --seed 28 --init cpu-small-pdl-gza-v8 --loss-weight alpha=2
-    --loss-weight separation=1 --loss-weight flip=2 --checkpoint-every 200 --spp-weight 4=2 --spp-weight 64=2
-    --spp-weight 128=2 --rotate-normals 0.5"
-[ -f $S/c128f-t1.done ] || { ( time ranad train $RECIPE --crop 128 -o $R/cpu-small-pdl-gza-c128f-t1 ) \
-    > $S/train_c128f-t1.log 2>&1 && touch $S/c128f-t1.done; }
-[ -f $S/c64f-t1.done ] || { ( time ranad train $RECIPE --crop 64 -o $R/cpu-small-pdl-gza-c64f-t1 ) \
-    > $S/train_c64f-t1.log 2>&1 && touch $S/c64f-t1.done; }
+trn c128f-t1 $V8_POOL $V8_OPTS --steps 1000 --crop 128
+trn c64f-t1 $V8_POOL $V8_OPTS --steps 1000 --crop 64
 for s in heldout_g1int8_box heldout_g1int8_boxsob heldout_g1int8 heldout_g1fog_boxsob heldout_g1sg8_boxsob \
          heldout_g1sg8; do
   ev c128f $s $R/cpu-small-pdl-gza-c128f-t1

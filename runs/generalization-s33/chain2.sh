@@ -1,12 +1,7 @@
 # chain1.sh's whole-frame fine-tune three times as long (c128f3-t1: v8 + 3000 steps of v8's recipe on its whole pool
 # at --crop 128, the schedule over 3000 steps), scored on the same six held-out sets.
 . "$(dirname "${BASH_SOURCE[0]}")/common.sh"
-RECIPE="train_g35_boxsob train_g35_boxsob train_g33_win train_g31_sub train_g30_sub --config cpu-small-pdl-gza
-    --steps 3000 --lr 1e-4 --seed 28 --init cpu-small-pdl-gza-v8 --loss-weight alpha=2
-    --loss-weight separation=1 --loss-weight flip=2 --checkpoint-every 200 --spp-weight 4=2 --spp-weight 64=2
-    --spp-weight 128=2 --rotate-normals 0.5"
-[ -f $S/c128f3-t1.done ] || { ( time ranad train $RECIPE --crop 128 -o $R/cpu-small-pdl-gza-c128f3-t1 ) \
-    > $S/train_c128f3-t1.log 2>&1 && touch $S/c128f3-t1.done; }
+trn c128f3-t1 $V8_POOL $V8_OPTS --steps 3000 --crop 128
 for s in heldout_g1int8_box heldout_g1int8_boxsob heldout_g1int8 heldout_g1fog_boxsob heldout_g1sg8_boxsob \
          heldout_g1sg8; do
   ev c128f3 $s $R/cpu-small-pdl-gza-c128f3-t1
