@@ -8,16 +8,20 @@ OIDN, and
 the edit ratios v8 and cp to OIDN then recolour, cp to cleaned OIDN then recolour.
 
 Usage: python cross.py SET... (run in the data folder's s31)"""
+from __future__ import annotations
+
 import csv
 import sys
 from collections import defaultdict
 
 
-def means(folder: str, kind: str = "deepz") -> dict:
+def means(folder: str, kind: str = "deepz", group: str | None = "held-out") -> dict:
+    """(spp, method, "flip" or "comp") -> mean over the scenes of `group` (None: every scene, for a set of one group
+    such as the in-family ones)."""
     acc = defaultdict(list)
     with open(f"{folder}/eval.csv") as f:
         for r in csv.DictReader(f):
-            if r["group"] == "held-out" and r["kind"] == kind and r["exposure"] == "0":
+            if group in (None, r["group"]) and r["kind"] == kind and r["exposure"] == "0":
                 acc[(int(r["spp"]), r["method"], "flip")].append(float(r["flip"]))
                 if r["comp_flip"] not in ("", "n/a", "nan"):
                     acc[(int(r["spp"]), r["method"], "comp")].append(float(r["comp_flip"]))

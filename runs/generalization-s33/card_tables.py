@@ -1,25 +1,15 @@
 """Session 33: the rows of cpu-small-pdl-gza-v9's card: per set, v8's and v9's flat FLIP / flat OIDN's and edit FLIP
-/ OIDN-then-recolour's at each spp (deep-Z, means over the scenes; every scene of these sets is of one group), and the largest difference of
-v9's deep-OID ratios from its deep-Z ones. v9 is run c128f3-t1 exported (the same weights): its evaluations are
-s33/ev_c128f3_SET, or s33/ev_v9_SET where the set was scored after the export; v8's s31/ev_v8_SET or s33/ev_v8_SET.
+/ OIDN-then-recolour's at each spp (deep-Z, means over the scenes; every scene of these sets is of one group), and
+the largest difference of v9's deep-OID ratios from its deep-Z ones. v9 is run c128f3-t1 exported (the same
+weights): its evaluations are s33/ev_c128f3_SET, or s33/ev_v9_SET where the set was scored after the export; v8's
+s31/ev_v8_SET or s33/ev_v8_SET.
 
 Usage: python card_tables.py SET...   (run in the data folder)"""
-import csv
 import os
 import sys
-from collections import defaultdict
 
-
-def means(folder: str, kind: str) -> dict:
-    """(spp, method, "flip" or "comp") -> mean over the scenes of the set's one group (held-out or in-family)."""
-    acc = defaultdict(list)
-    with open(f"{folder}/eval.csv") as f:
-        for r in csv.DictReader(f):
-            if r["kind"] == kind and r["exposure"] == "0":
-                acc[(int(r["spp"]), r["method"], "flip")].append(float(r["flip"]))
-                if r["comp_flip"] not in ("", "n/a", "nan"):
-                    acc[(int(r["spp"]), r["method"], "comp")].append(float(r["comp_flip"]))
-    return {k: sum(v) / len(v) for k, v in acc.items()}
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "generalization-s31"))
+from cross import means  # noqa: E402
 
 
 def found(*folders):
@@ -27,7 +17,7 @@ def found(*folders):
 
 
 def ratios(folder, kind, metric, base):
-    m = means(folder, kind)
+    m = means(folder, kind, group=None)   # every scene of these sets is of one group
     return {spp: m[(spp, "ranad", metric)] / m[(spp, base, metric)]
             for spp in sorted({k[0] for k in m}) if (spp, "ranad", metric) in m and (spp, base, metric) in m}
 

@@ -63,7 +63,8 @@ def main() -> None:
             outs = {"R": fn, "gain b=1": gained(fn, fo, 1.0), "gain b=0.5": gained(fn, fo, 0.5),
                     "gain rule": gained(fn, fo, rule), "blend 0.5": 0.5 * fn + 0.5 * fo}
             eo, en = fmap(fr, fo), fmap(fr, fn)
-            q = np.searchsorted(np.quantile(contrast(lum(fr)), [0.25, 0.5, 0.75]), contrast(lum(fr)))
+            cr = contrast(lum(fr))
+            q = np.searchsorted(np.quantile(cr, [0.25, 0.5, 0.75]), cr)
             oracle = sum(min(eo[q == k].sum(), en[q == k].sum()) for k in range(4)) / eo.size
             row = [metrics.flip(fr, outs[v]) for v in VARIANTS[:-1]] + [oracle, float(eo.mean())]
             acc[p.spp].append(row)
