@@ -1,13 +1,14 @@
 """Diagnostic (session 33): can ranad's flat output take flat OIDN's luminance where OIDN is better, by a per-pixel
 gain (the light-matching mechanism: one gain per pixel keeps every output linear in the noisy values)?
 
-For each deep-Z scene of a set at 4 and 16 spp: R = ranad's flat image (default model), O = flat OIDN's (albedo
+For each deep-Z scene of a set at 4 and 16 spp: R = ranad's flat image (MODEL), O = flat OIDN's (albedo
 and normal), and per-pixel variants of R times a gain toward O's luminance: R (L_O / L_R)^b with b = 1, 0.5; b from
 a rule that needs no reference (1 where O's 3x3 luminance range over its mean is below that frame's median, fading
 to 0 at twice it); the linear blend 0.5 R + 0.5 O (session 28); and, as a ceiling of any region-wise choice, an
 oracle that takes R or O per quartile of the reference's local contrast, whichever scores lower there. Prints mean
 flat HDR-FLIP over the scenes divided by O's.
-Usage: python gain_blend.py SET...   (run in the data folder)"""
+Usage: python gain_blend.py [--model M] SET...   (run in the data folder; M: cpu-small-pdl-gza-v8, the default
+       when the study ran it, unless given)"""
 import collections
 import sys
 
@@ -48,8 +49,12 @@ def gained(r, o, b):
 
 
 def main() -> None:
-    model = load_model(None).model
-    for folder in sys.argv[1:]:
+    args = sys.argv[1:]
+    name = "cpu-small-pdl-gza-v8"
+    if args[:1] == ["--model"]:
+        name, args = args[1], args[2:]
+    model = load_model(name).model
+    for folder in args:
         acc = collections.defaultdict(list)
         for p in find_pairs([folder]):
             if p.kind != "deepz" or p.spp not in (4, 16):
