@@ -399,3 +399,20 @@ def test_default_model_follows_the_shot():
     assert default_model_for([1, 3, 5], None) == DEFAULT_MODEL
     assert default_model_for([None], None) == DEFAULT_MODEL
     assert default_model_for([7], None) == DEFAULT_MODEL
+
+
+def test_default_pair_shares_its_spatial_weights():
+    """A shot's frames get the spatial model a single frame gets: the default cross-frame model's single-frame part
+    holds the default single-frame model's weights bit for bit (trained with --freeze-spatial from them), so `ranad
+    denoise` of a sequence and of one of its frames alone differ only by what the neighbours bring."""
+    from ranad_core.model.store import DEFAULT_CROSS_MODEL, DEFAULT_MODEL, load_model
+
+    single = load_model(DEFAULT_MODEL).model.state_dict()
+    cross = load_model(DEFAULT_CROSS_MODEL).model.state_dict()
+    inner = {k[len("single."):]: v for k, v in cross.items() if k.startswith("single.")}
+    assert inner.keys() == single.keys()
+    w, n = inner["embed.0.weight"], single["embed.0.weight"].shape[1]
+    assert not w[:, n:].any()   # the frame one-hot columns (CrossFrameRaNAD.from_single), zero and frozen
+    inner["embed.0.weight"] = w[:, :n]
+    differ = [k for k, v in single.items() if not torch.equal(v, inner[k])]
+    assert not differ, f"{DEFAULT_CROSS_MODEL} was not trained on {DEFAULT_MODEL}: {differ[:3]}"

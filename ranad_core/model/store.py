@@ -25,7 +25,7 @@ from .ranad import RaNAD
 
 WEIGHTS_DIR = Path(__file__).resolve().parents[1] / "weights"
 DEFAULT_MODEL = "cpu-small-pdl-gza-v9"       # single frames
-DEFAULT_CROSS_MODEL = "cpu-small-pdl-gza-xg-v8"  # sequences: frames with neighbours
+DEFAULT_CROSS_MODEL = "cpu-small-pdl-gza-xg-v9"  # sequences: frames with neighbours
 
 
 def default_model(sequence: bool) -> str:
