@@ -5,8 +5,9 @@ cd /work/data
 export NUMPY_MADVISE_HUGEPAGE=0
 R=/work/main/runs
 S=${S:-s27}
-# syn NAME OPTIONS...: ranad synth of 128x128 single frames with 1024-spp references into NAME (skipped once done)
-syn() { [ -f $S/$1.done ] || { ( time ranad synth -o $1 --size 128 --frames 1 --ref-spp 1024 --workers 2 \
+# syn NAME OPTIONS...: ranad synth of 128x128 single frames (FRAMES=3 syn ...: shots of 3) with 1024-spp references
+# into NAME (skipped once done)
+syn() { [ -f $S/$1.done ] || { ( time ranad synth -o $1 --size 128 --frames ${FRAMES:-1} --ref-spp 1024 --workers 2 \
     "${@:2}" ) > $S/synth_$1.log 2>&1 && touch $S/$1.done; }; }
 # ev TAG SET MODEL: ranad eval of SET with the held-out families, into $S/ev_TAG_SET (skipped once done)
 ev() { [ -f $S/ev_$1_$2/eval.md ] || ( time ranad eval $2 -o $S/ev_$1_$2 --model $3 \

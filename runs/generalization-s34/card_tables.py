@@ -13,18 +13,12 @@ import math
 import os
 import sys
 
-sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "generalization-s31"))
-from cross import means  # noqa: E402
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "generalization-s33"))
+from card_tables import ratios  # noqa: E402  (session 33's: ranad's mean over every scene / the baseline's, per spp)
 
 
 def found(patterns, s):
     return next((f for f in (p.format(set=s) for p in patterns) if os.path.exists(f + "/eval.csv")), None)
-
-
-def ratios(folder, kind, metric, base):
-    m = means(folder, kind, group=None)   # every scene of these sets is of one group
-    return {spp: m[(spp, "ranad", metric)] / m[(spp, base, metric)]
-            for spp in sorted({k[0] for k in m}) if (spp, "ranad", metric) in m and (spp, base, metric) in m}
 
 
 def main() -> None:

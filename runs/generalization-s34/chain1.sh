@@ -20,19 +20,13 @@ for s in heldout_g1fog heldout_g1w4 heldout_g1fog_rot heldout_g1int8_rot heldout
 done
 # shots: sequences of 3 frames, box-filtered (the synth default), references on every held-out frame
 P="--preset easy --preset medium --preset deep-heavy --preset studio --preset thin --preset textured"
-shots() { [ -f $S/$1.done ] || { ( time ranad synth -o $1 --size 128 --frames 3 --ref-spp 1024 --workers 2 \
-    "${@:2}" ) > $S/synth_$1.log 2>&1 && touch $S/$1.done; }; }
-shots heldout_g3s2 --scenes 6 --spp 4,16 --seed 1023 --preset glass --preset layers --motion 0.25 --ref-frames all
-shots heldout_g3s2g --scenes 6 --spp 4,16 --seed 1023 --preset glass --preset layers --motion 0.25 \
+FRAMES=3 syn heldout_g3s2 --scenes 6 --spp 4,16 --seed 1023 --preset glass --preset layers --motion 0.25 \
+    --ref-frames all
+FRAMES=3 syn heldout_g3s2g --scenes 6 --spp 4,16 --seed 1023 --preset glass --preset layers --motion 0.25 \
     --ref-frames all $G --filter-width 2
-shots train_g3 --scenes 12 --spp 4,16,64 --seed 3 $P
-shots train_g3s --scenes 24 --spp 4,16,64 --seed 31 --motion 0.25 $P
-[ -f $S/xg9.done ] || { ( time OMP_NUM_THREADS=2 ranad train train_g3 train_g3s -o $R/cpu-small-pdl-gza-xg-t9 \
-    --config cpu-small-pdl-gza-xg --init $V9 --window 3 --steps 800 --crop 64 --lr 5e-4 --seed 0 --freeze-spatial \
-    --loss-weight alpha=2 --loss-weight separation=1 --checkpoint-every 100 ) > $S/train_xg9.log 2>&1 \
-    && touch $S/xg9.done; } || exit 1
-[ -f $S/xg9.safetensors ] || bash $R/generalization-s23/export.sh $R/cpu-small-pdl-gza-xg-t9 $S/xg9.safetensors \
-    > $S/export_xg9.log 2>&1 || exit 1
+FRAMES=3 syn train_g3 --scenes 12 --spp 4,16,64 --seed 3 $P
+FRAMES=3 syn train_g3s --scenes 24 --spp 4,16,64 --seed 31 --motion 0.25 $P
+xgt 9 $V9 || exit 1
 for s in heldout_g3s2 heldout_g3s2g; do
     evt xg9 $s cpu-small-pdl-gza-v9 $S/xg9.safetensors
     evt xg8 $s cpu-small-pdl-gza-v8 cpu-small-pdl-gza-xg-v8

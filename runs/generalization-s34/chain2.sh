@@ -13,12 +13,7 @@ for s in heldout_g1int8_box heldout_g1int8_boxsob heldout_g1int8 heldout_g1fog_b
          heldout_g1sg8_rot heldout_g1sg8_yaw infam_g36_box infam_g36_boxsob; do
     ev v10 $s $S/v10.safetensors
 done
-[ -f $S/xg10.done ] || { ( time OMP_NUM_THREADS=2 ranad train train_g3 train_g3s -o $R/cpu-small-pdl-gza-xg-t10 \
-    --config cpu-small-pdl-gza-xg --init $S/v10.safetensors --window 3 --steps 800 --crop 64 --lr 5e-4 --seed 0 \
-    --freeze-spatial --loss-weight alpha=2 --loss-weight separation=1 --checkpoint-every 100 ) \
-    > $S/train_xg10.log 2>&1 && touch $S/xg10.done; } || exit 1
-[ -f $S/xg10.safetensors ] || bash $R/generalization-s23/export.sh $R/cpu-small-pdl-gza-xg-t10 \
-    $S/xg10.safetensors > $S/export_xg10.log 2>&1 || exit 1
+xgt 10 $S/v10.safetensors || exit 1
 for s in heldout_g3s2 heldout_g3s2g; do evt xg10 $s $S/v10.safetensors $S/xg10.safetensors; done
 [ -f $S/evx10/eval.md ] || ( time ranad eval heldout_g1sg8 -o $S/evx10 --model $S/v10.safetensors \
     --held-out glass,layers,interior,fog --grid 0 --kind deepz --exposure -6,0,6 ) > $S/evx10.log 2>&1
