@@ -91,6 +91,36 @@ def test_staged_sources_are_written_only_when_they_differ(tmp_path):
     assert sorted(p.name for p in src.iterdir()) == sorted(names)   # no temporary file left
 
 
+def test_a_load_that_takes_build_time_says_so(monkeypatch, tmp_path, capsys):
+    """A module that exists but whose build is out of date (a newer torch or header): torch's builder recompiles it,
+    which took 90 s without a word. The load still runs; once it takes longer than a load does, the user is told.
+    A load that returns at once prints nothing."""
+    import shutil
+    import time
+
+    import torch.utils.cpp_extension as cpp
+
+    from ranad_core.rana import extension
+
+    ext = extension.load_cpu_extension()
+    built = Path(ext.__file__).parent
+    name = built.name
+    monkeypatch.setenv("RANAD_KERNEL_CACHE", str(tmp_path))
+    folder = extension.build_folder(name)
+    folder.mkdir(parents=True)
+    shutil.copy(built / f"{name}.so", folder / f"{name}.so")
+    monkeypatch.setattr(extension, "REBUILD_NOTICE_S", 0.2)
+    monkeypatch.setattr(cpp, "load", lambda **kw: ext)
+    assert extension._build("C++", name, extension.CPU_SOURCES, extension.CPU_HEADERS) is ext
+    time.sleep(0.4)
+    assert "RaNA kernels" not in capsys.readouterr().err   # a quick load: no message, none later
+
+    monkeypatch.setattr(cpp, "load", lambda **kw: time.sleep(0.6) or ext)
+    assert extension._build("C++", name, extension.CPU_SOURCES, extension.CPU_HEADERS) is ext
+    err = capsys.readouterr().err
+    assert "rebuilding the C++ RaNA kernels" in err and str(folder) in err
+
+
 HOLDER = """
 import sys, time
 from pathlib import Path
