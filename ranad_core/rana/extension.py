@@ -2,12 +2,13 @@
 
 Built on first use (with a message on stderr: it takes a minute or two) and cached, so later runs load in
 milliseconds; a cached build that torch's builder finds out of date is rebuilt, with a message too once the load
-takes longer than a load does. The cache folder is ``$RANAD_KERNEL_CACHE`` when set (a folder a render farm shares), else torch's
-(``$TORCH_EXTENSIONS_DIR``, default ``~/.cache/torch_extensions``). The build is tuned for the CPU it runs on
-(``-march=native``); the extension name carries a hash of the CPU's feature flags and of the sources, so a shared
-cache holds one build per CPU type and version and never hands a binary to a CPU that cannot run it. The sources
-are compiled from a copy inside the build folder, so no install's path enters the build: installs in different
-places share one build (compiled from their own paths, each would make the other's look out of date and rebuild it).
+takes longer than a load does. The cache folder is ``$RANAD_KERNEL_CACHE`` when set (a folder a render farm shares),
+else torch's (``$TORCH_EXTENSIONS_DIR``, default ``~/.cache/torch_extensions``). The build is tuned for the CPU it
+runs on (``-march=native``); the extension name carries a hash of the CPU's feature flags and of the sources, so a
+shared cache holds one build per CPU type and version and never hands a binary to a CPU that cannot run it. The
+sources are compiled from a copy inside the build folder, so no install's path enters the build: installs in
+different places share one build (compiled from their own paths, each would make the other's look out of date and
+rebuild it).
 
 Builds of one folder take turns under a lock the system releases when its holder dies: a build interrupted (Ctrl-C, a
 farm job killed) leaves no lock behind that would make every later run wait for ever, as torch's own lock file would.
@@ -116,10 +117,11 @@ def _build(what: str, name: str, sources, headers, **kwargs):
                 print(f"ranad: building the {what} RaNA kernels for this machine (once per CPU type and version, a "
                       f"minute or two) in {folder}" + (" (the folder was built elsewhere)" if moved else ""),
                       file=sys.stderr, flush=True)
-                return load(name=name, sources=[str(src / n) for n in sources], build_directory=str(folder),
-                            verbose=False, **kwargs)
-            with rebuild_notice(f"ranad: rebuilding the {what} RaNA kernels in {folder} (their build is out of "
-                                "date: a compiler, torch or header changed; a minute or two)"):
+                notice = contextlib.nullcontext()
+            else:
+                notice = rebuild_notice(f"ranad: rebuilding the {what} RaNA kernels in {folder} (their build is out "
+                                        "of date: a compiler, torch or header changed; a minute or two)")
+            with notice:
                 return load(name=name, sources=[str(src / n) for n in sources], build_directory=str(folder),
                             verbose=False, **kwargs)
     except Exception as e:  # noqa: BLE001 - any build failure means: use the reference
@@ -132,16 +134,15 @@ REBUILD_NOTICE_S = 3.0   # a built module loads in a fraction of a second; longe
 
 
 @contextlib.contextmanager
-def rebuild_notice(message: str, after: float | None = None):
-    """Prints `message` on stderr if the block is still running `after` seconds on (REBUILD_NOTICE_S by default).
+def rebuild_notice(message: str):
+    """Prints `message` on stderr if the block is still running REBUILD_NOTICE_S seconds on.
     Torch's builder recompiles a module that exists when its build is out of date (a newer torch or header, another
     compiler: ninja's own rules), which took 90 s without a word on a machine whose files were restored; the module
     being there, nothing says in advance that it will, so the notice comes when the load takes build time."""
     import sys
     import threading
 
-    timer = threading.Timer(REBUILD_NOTICE_S if after is None else after,
-                            lambda: print(message, file=sys.stderr, flush=True))
+    timer = threading.Timer(REBUILD_NOTICE_S, lambda: print(message, file=sys.stderr, flush=True))
     timer.daemon = True
     timer.start()
     try:
