@@ -3,7 +3,7 @@
 # Gaussian-filtered ones. Session 34's v10 ran another 3000 steps of v9's recipe on that pool and gained a third of a
 # percent; this chain runs the same 3000 steps (same seed, same options) on twice as many scenes of the same
 # training families, every scene listed once and the two filters in equal parts: 48 new box-filtered Sobol scenes
-# and 24 new Gaussian-filtered stratified ones (new seeds; the Gaussian renders take 100 s a scene here, so 24 rather
+# and 24 new Gaussian-filtered stratified ones (new seeds; the Gaussian renders take a minute a scene here, so 24 rather
 # than 48), 144 in all. Scored on every held-out set of v9's card and session 34's, in-family, the exposure sweep;
 # then a cross-frame model on it by xg-v8's recipe, on the two shot sets. (Stopped after the in-family sets: the
 # result was not to be shipped, so its cross-frame model, shots and exposure sweep did not run.)
