@@ -53,11 +53,9 @@ def test_the_build_compiles_the_staged_copy_of_the_sources():
         assert (folder / extension.STAGED / name).read_bytes() == (extension.SOURCE_DIR / name).read_bytes()
 
 
-def test_a_read_only_kernel_cache_is_used_as_it_is(monkeypatch, tmp_path):
-    """A farm's prebuilt kernel cache mounted read-only: the build lock could not be opened there, so ranad fell
-    back to the slow torch reference (2.5 s against 0.4 s a frame). The folder's name carries the sources'
-    digest and the CPU type, so its module is imported as it is, nothing written."""
-    import os
+def _built_module_in_cache(monkeypatch, tmp_path):
+    """This machine's built kernel module copied alone into a fresh kernel cache ($RANAD_KERNEL_CACHE = tmp_path):
+    (module, extension name, its folder there)."""
     import shutil
 
     from ranad_core.rana import extension
@@ -69,6 +67,18 @@ def test_a_read_only_kernel_cache_is_used_as_it_is(monkeypatch, tmp_path):
     folder = extension.build_folder(name)
     folder.mkdir(parents=True)
     shutil.copy(built / f"{name}.so", folder / f"{name}.so")
+    return ext, name, folder
+
+
+def test_a_read_only_kernel_cache_is_used_as_it_is(monkeypatch, tmp_path):
+    """A farm's prebuilt kernel cache mounted read-only: the build lock could not be opened there, so ranad fell
+    back to the slow torch reference (2.5 s against 0.4 s a frame). The folder's name carries the sources'
+    digest and the CPU type, so its module is imported as it is, nothing written."""
+    import os
+
+    from ranad_core.rana import extension
+
+    _, name, folder = _built_module_in_cache(monkeypatch, tmp_path)
     real_access = os.access
     monkeypatch.setattr(extension.os, "access", lambda p, mode: False if Path(p) == folder and mode == os.W_OK
                         else real_access(p, mode))
@@ -95,20 +105,13 @@ def test_a_load_that_takes_build_time_says_so(monkeypatch, tmp_path, capsys):
     """A module that exists but whose build is out of date (a newer torch or header): torch's builder recompiles it,
     which took 90 s without a word. The load still runs; once it takes longer than a load does, the user is told.
     A load that returns at once prints nothing."""
-    import shutil
     import time
 
     import torch.utils.cpp_extension as cpp
 
     from ranad_core.rana import extension
 
-    ext = extension.load_cpu_extension()
-    built = Path(ext.__file__).parent
-    name = built.name
-    monkeypatch.setenv("RANAD_KERNEL_CACHE", str(tmp_path))
-    folder = extension.build_folder(name)
-    folder.mkdir(parents=True)
-    shutil.copy(built / f"{name}.so", folder / f"{name}.so")
+    ext, name, folder = _built_module_in_cache(monkeypatch, tmp_path)
     monkeypatch.setattr(extension, "REBUILD_NOTICE_S", 0.2)
     monkeypatch.setattr(cpp, "load", lambda **kw: ext)
     assert extension._build("C++", name, extension.CPU_SOURCES, extension.CPU_HEADERS) is ext
