@@ -63,8 +63,13 @@ from .params import width_range
 @click.option("--filter-width", default="2", show_default=True, callback=lambda _c, _p, v: width_range(v),
               help="The Gaussian's width in pixels (Arnold's and RenderMan's default: 2), or a range A:B that each "
                    "scene draws its width from (training data for files of many renderers).")
+@click.option("--enclosure", default=0.0, show_default=True, type=FiniteFloat(0, 1),
+              help="Share of scenes put inside a room: a back wall, side walls and (without a sky) a ceiling, turned "
+                   "and spaced at random around the scene's own objects, in its family's opaque materials, with its "
+                   "lights moved inside and some aimed at the walls (bounce light). Each scene's other draws stay "
+                   "as they were; families with walls of their own (interior) are left alone.")
 def synth_cmd(out, scenes, size, frames, spp, ref_spp, seed, presets, kinds, workers, ref_frames, motion, bin_gap,
-              sampler, guides, pixel_filter, filter_width):
+              sampler, guides, pixel_filter, filter_width, enclosure):
     """Render SCENES procedural animated scenes: every frame at each noisy spp, and the centre frame's
     reference binned into each noisy image's bins, as deep-Z and deep-OID EXRs with a manifest per scene.
 
@@ -80,7 +85,7 @@ def synth_cmd(out, scenes, size, frames, spp, ref_spp, seed, presets, kinds, wor
                               seed=seed, presets=tuple(presets) or PRESETS,
                               kinds=tuple(kinds) or ("deepz", "deepoid"), ref_frames=ref_frames,
                               motion=motion, bin_gap=bin_gap, sampler=sampler, guides=guides,
-                              pixel_filter=pixel_filter, filter_width=filter_width)
+                              pixel_filter=pixel_filter, filter_width=filter_width, enclosure=enclosure)
     skipped = sum(dataset.is_done(cfg, i) for i in range(scenes))
     try:
         with tqdm(total=scenes - skipped, desc="synth", unit="scene", disable=scenes - skipped <= 1) as bar:

@@ -392,6 +392,29 @@ def test_a_family_scene_renders(tmp_path):
         assert img.num_bins > 0
 
 
+def test_an_enclosed_scene_renders_inside_its_room(tmp_path):
+    """`--enclosure`: the same scenes inside rooms go through the whole writer (channels sum to the beauty), the
+    manifest says which were enclosed, and the walls fill background the open scene left empty."""
+    import json
+
+    covered = {}
+    for share in (0.0, 1.0):
+        cfg = dataset.SynthConfig(out=str(tmp_path / f"ds{share}"), scenes=2, size=24, frames=1, spp=(4,),
+                                  ref_spp=16, seed=3, presets=("easy", "studio"), kinds=("deepz",), enclosure=share)
+        dataset.run(cfg)
+        for i in range(2):
+            root = os.path.join(cfg.out, f"scene_{i:04d}")
+            with open(os.path.join(root, "manifest.json")) as f:
+                assert json.load(f).get("enclosed", False) == bool(share)
+            img = read_deep(os.path.join(root, "deepz", "noisy_spp4.0000.exr"))
+            parts = sum(cols(img, [f"{k}.{c}" for c in "RGB"]) for k in ("diffuse", "specular", "emission"))
+            np.testing.assert_allclose(parts, cols(img, ["R", "G", "B"]), rtol=2e-3, atol=2e-3)
+            covered[share, i] = float((np.diff(img.offsets) > 0).mean())
+    for i in range(2):
+        assert covered[1.0, i] >= covered[0.0, i]
+    assert sum(covered[1.0, i] for i in range(2)) > sum(covered[0.0, i] for i in range(2))
+
+
 def test_one_trace_call_gives_each_chunk_its_own_random_numbers():
     """trace(..., chunk=c) over a range gives every sample the random numbers of its own c-sample call (Dr.Jit's
     PCG32 seeds by lane, so this is what keeps references byte-identical with fewer calls), and a subset of a

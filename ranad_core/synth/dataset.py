@@ -21,6 +21,7 @@ import numpy as np
 from ..exr import write_deep
 from ..fileutil import atomic_output
 from .binning import Z_GAP_REL
+from .enclosure import enclose
 from .scene import PRESETS, make_scene
 from .trace import load_frame
 
@@ -45,6 +46,7 @@ class SynthConfig:
     guides: str = "first-hit"         # albedo/normal of the first surface, or "through-specular" (trace)
     pixel_filter: str = "box"         # "box" (a sample in its own pixel) or "gaussian" (pixel_filter.py)
     filter_width: tuple = (2.0, 2.0)  # the Gaussian's width in pixels, or the range each scene draws it from
+    enclosure: float = 0.0            # share of scenes put inside a room (enclosure.py: walls, bounce light)
 
 
 def scene_seed(seed: int, index: int) -> int:
@@ -90,6 +92,7 @@ def make_one(cfg: SynthConfig, index: int) -> dict:
     sseed = scene_seed(cfg.seed, index)
     preset = cfg.presets[index % len(cfg.presets)]
     spec = make_scene(sseed, preset, cfg.size, cfg.frames, cfg.motion)
+    enclosed = enclose(spec, cfg.enclosure)
     centre = cfg.frames // 2
     root = scene_dir(cfg, index)
     files, stats = [], {}
@@ -133,6 +136,7 @@ def make_one(cfg: SynthConfig, index: int) -> dict:
                 **({"sampler": cfg.sampler} if cfg.sampler != "independent" else {}),
                 **({"guides": cfg.guides} if cfg.guides != "first-hit" else {}),
                 **({"pixel_filter": list(film)} if cfg.pixel_filter != "box" else {}),
+                **({"enclosure": cfg.enclosure, "enclosed": enclosed} if cfg.enclosure else {}),
                 "light_groups": spec.light_groups, "objects": len(spec.objects), "files": files, "stats": stats,
                 "seconds": round(time.perf_counter() - t0, 2)}
     with atomic_output(os.path.join(root, "manifest.json")) as tmp:
