@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .scene import PRESET_PARAMS, SceneObject, SceneSpec, _material, look_at, rotate, scale, translate
+from .scene import PRESET_PARAMS, SceneObject, SceneSpec, draw_material, look_at, rotate, scale, translate
 
 ENCLOSURE_STREAM = 0xE7C            # the enclosure's random stream: np.random.default_rng([scene seed, this])
 _TRANSPARENT = ("dielectric", "roughdielectric", "thindielectric")
@@ -33,7 +33,7 @@ def _wall_material(rng: np.random.Generator, spec: SceneSpec) -> dict:
     """An opaque material from the scene's family mix (glass left out: a wall is opaque), or a matte one."""
     p = PRESET_PARAMS[spec.preset]
     weights = {k: v for k, v in (p.get("materials") or _MATTE_WALLS).items() if k not in _TRANSPARENT}
-    return _material(rng, weights or _MATTE_WALLS, p.get("tex_freq", (1, 8)))
+    return draw_material(rng, weights or _MATTE_WALLS, p.get("tex_freq", (1, 8)))
 
 
 def enclose(spec: SceneSpec, share: float) -> bool:

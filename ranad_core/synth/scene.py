@@ -198,7 +198,7 @@ def _two_sided(bsdf: dict) -> dict:
     return {"type": "twosided", "bsdf": bsdf}
 
 
-def _material(rng: np.random.Generator, weights: dict, tex_freq) -> dict:
+def draw_material(rng: np.random.Generator, weights: dict, tex_freq) -> dict:
     """A BSDF drawn from a family's material weights (MATERIALS)."""
     names = list(weights)
     p = np.asarray([weights[n] for n in names], float)
@@ -374,7 +374,7 @@ def make_scene(seed: int, preset: str = "medium", size: int = 128, frames: int =
     next_id = iter(range(1, 1000))
     if family:  # the family's material mix replaces the presets' diffuse/glossy choice
         def _bsdf(rng, glossy):  # noqa: F811 (shadows the module-level sampler on purpose)
-            return _material(rng, p["materials"], p["tex_freq"])
+            return draw_material(rng, p["materials"], p["tex_freq"])
     else:
         _bsdf = globals()["_bsdf"]
 
@@ -488,7 +488,7 @@ def _family_extras(spec: SceneSpec, p: dict, rng: np.random.Generator, add, cam_
         pos = [rng.uniform(-2.0, 2.0), rng.uniform(0.4, 1.0), rng.uniform(-1.0, 3.0)]
         base = translate(pos) @ rotate([0, 1, 0], rng.uniform(-60, 60)) @ scale([rng.uniform(0.6, 1.6),
                                                                                   rng.uniform(0.4, 0.9), 1])
-        add("rectangle", {"type": "twosided", "bsdf": _material(rng, dict(diffuse=2, roughconductor=1), (2, 8))},
+        add("rectangle", {"type": "twosided", "bsdf": draw_material(rng, dict(diffuse=2, roughconductor=1), (2, 8))},
             base, cutout=CUTOUT_FENCE, vel=np.zeros(3) if rng.random() < 0.5 else None)
     for _ in range(int(rng.integers(*p["stacks"], endpoint=True))):  # 4-8 parallel semi-transparent layers
         layers = int(rng.integers(4, 9))
@@ -498,7 +498,7 @@ def _family_extras(spec: SceneSpec, p: dict, rng: np.random.Generator, add, cam_
             pos = cam_o + (cam_t - cam_o) * (start + step * k) + shift * (1 + 0.2 * k)
             base = look_at(pos, cam_o) @ rotate([0, 0, 1], rng.uniform(-20, 20)) @ \
                 scale([rng.uniform(0.3, 0.9), rng.uniform(0.25, 0.7), 1])
-            mat = _material(rng, dict(diffuse=2, textured=1, roughplastic=1), (2, 16))
+            mat = draw_material(rng, dict(diffuse=2, textured=1, roughplastic=1), (2, 16))
             add("rectangle", {"type": "twosided", "bsdf": mat}, base, opacity=float(rng.uniform(0.1, 0.45)),
                 spin=float(rng.uniform(-4, 4) * m))
     for _ in range(int(rng.integers(*p["glass_sheets"], endpoint=True))):  # thin glass in front of the scene
@@ -511,7 +511,7 @@ def _family_extras(spec: SceneSpec, p: dict, rng: np.random.Generator, add, cam_
         if rng.random() < 0.5:
             walls.append(translate([WALL, 0, 0]) @ rotate([0, 1, 0], -90) @ scale(8))
         for base in walls:
-            add("rectangle", _material(rng, dict(diffuse=2, textured=1), (1, 4)), base, vel=np.zeros(3))
+            add("rectangle", draw_material(rng, dict(diffuse=2, textured=1), (1, 4)), base, vel=np.zeros(3))
     if p["meshes"][1] > 0:   # blobs and tori standing on the ground
         for _ in range(int(rng.integers(*p["meshes"], endpoint=True))):
             size = rng.uniform(0.3, 0.7)
@@ -524,7 +524,7 @@ def _family_extras(spec: SceneSpec, p: dict, rng: np.random.Generator, add, cam_
                 shape = rotate(rng.normal(size=3), rng.uniform(0, 180)) @ scale(size)
                 lift = size * (1 + mesh["minor"])
             base = translate([rng.uniform(-2.2, 2.2), lift, rng.uniform(-2.0, 2.0)]) @ shape
-            add("mesh", _material(rng, p["materials"], p["tex_freq"]), base, spin=float(rng.uniform(-15, 15) * m),
+            add("mesh", draw_material(rng, p["materials"], p["tex_freq"]), base, spin=float(rng.uniform(-15, 15) * m),
                 mesh=mesh)
 
 
