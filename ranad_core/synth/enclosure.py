@@ -77,22 +77,21 @@ def enclose(spec: SceneSpec, share: float) -> bool:
                                               "spin": 0.0}))
         targets.append(world)
     bounce = float(rng.uniform(0.3, 1.0))
+    top = (ceiling if ceiling is not None else height + 2.0) - 0.3   # the lights' room: 0.3 inside its walls
+    x_max = (right if right is not None else np.inf) - 0.3
     for o in lights:
         m = np.asarray(o.transforms[0], float)
         size = float(np.linalg.norm(m[:3, 0]))
         pos = _room_coords(yaw, m[None, :3, 3])[0]
-        top = (ceiling if ceiling is not None else height + 2.0) - 0.3
-        pos = np.array([min(max(pos[0], 0.3 - left), (right if right is not None else 1e9) - 0.3),
-                        min(pos[1], top), max(pos[2], 0.3 - back)])
+        pos = np.array([min(max(pos[0], 0.3 - left), x_max), min(pos[1], top), max(pos[2], 0.3 - back)])
         world_pos = turn[:3, :3] @ pos
-        aim = m[:3, 3] + m[:3, 2]          # where it pointed: along its own +z
         if rng.random() < bounce:          # at a wall (or the ceiling): bounce light
             w = targets[int(rng.integers(len(targets)))]
             aim = (w @ np.array([*rng.uniform(-0.6, 0.6, 2), 0.0, 1.0]))[:3]
             if np.linalg.norm((aim - world_pos)[[0, 2]]) < 1e-2:   # straight up: look_at needs a horizontal part
                 aim = aim + np.array([0.1, 0.0, 0.0])
-        else:
-            aim = aim - m[:3, 3] + world_pos
+        else:                              # the way it pointed before: along its own +z
+            aim = world_pos + m[:3, 2]
         base = look_at(world_pos, aim) @ scale(size)
         o.transforms = [base] * len(o.transforms)
         if o.anim is not None:
