@@ -18,7 +18,8 @@ from .params import width_range
 
 @click.command("synth")
 @click.option("-o", "--out", "out", required=True, type=click.Path(file_okay=False),
-              help="Dataset folder (created; scenes already complete in it are skipped, so reruns resume).")
+              help="Dataset folder (created; scenes already complete in it are skipped, so reruns resume; a folder "
+                   "whose scenes were made with other options is refused).")
 @click.option("--scenes", default=8, show_default=True, type=click.IntRange(1), help="Number of scenes.")
 @click.option("--size", default=128, show_default=True, type=click.IntRange(8, 4096), help="Image width and height.")
 @click.option("--frames", default=3, show_default=True, type=click.IntRange(1, 7), help="Frames per scene.")

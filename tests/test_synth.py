@@ -415,6 +415,27 @@ def test_an_enclosed_scene_renders_inside_its_room(tmp_path):
     assert sum(covered[1.0, i] for i in range(2)) > sum(covered[0.0, i] for i in range(2))
 
 
+def test_a_rerun_resumes_only_a_folder_of_the_same_recipe(small_dataset, tmp_path):
+    """A rerun with the same options renders nothing again; one with other options (which would skip the complete
+    scenes and mix two recipes in one folder) is refused before anything renders, naming the scene and the option;
+    an unreadable manifest is named too."""
+    from dataclasses import replace
+
+    from ranad_core.errors import RanadError
+
+    assert dataset.run(small_dataset) == []
+    for change, option in ((dict(sampler="sobol"), "sampler"), (dict(enclosure=0.5), "enclosure"),
+                           (dict(spp=(4, 64)), "spp"), (dict(seed=6), "seed"), (dict(size=24), "size")):
+        with pytest.raises(RanadError, match=f"scene_0000: this scene was made with {option} "):
+            dataset.run(replace(small_dataset, **change))
+    broken = replace(small_dataset, out=str(tmp_path / "copy"))
+    os.makedirs(dataset.scene_dir(broken, 0))
+    with open(os.path.join(dataset.scene_dir(broken, 0), "manifest.json"), "w") as f:
+        f.write("{not json")
+    with pytest.raises(RanadError, match="manifest.json: unreadable scene manifest"):
+        dataset.run(broken)
+
+
 def test_one_trace_call_gives_each_chunk_its_own_random_numbers():
     """trace(..., chunk=c) over a range gives every sample the random numbers of its own c-sample call (Dr.Jit's
     PCG32 seeds by lane, so this is what keeps references byte-identical with fewer calls), and a subset of a

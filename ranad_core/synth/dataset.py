@@ -18,6 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..errors import RanadError
 from ..exr import write_deep
 from ..fileutil import atomic_output
 from .binning import Z_GAP_REL
@@ -145,9 +146,47 @@ def make_one(cfg: SynthConfig, index: int) -> dict:
     return manifest
 
 
+# a manifest leaves these out where they have their default: the value to compare when the key is absent
+_ABSENT = {"bin_gap": Z_GAP_REL, "sampler": "independent", "guides": "first-hit", "pixel_filter": "box",
+           "enclosure": 0.0}
+
+
+def _recipe(cfg: SynthConfig, index: int) -> dict:
+    """What a complete scene's manifest must agree on with the command that resumes its folder."""
+    return {"seed": scene_seed(cfg.seed, index), "preset": cfg.presets[index % len(cfg.presets)], "size": cfg.size,
+            "frames": cfg.frames, "spp": list(cfg.spp), "ref_spp": cfg.ref_spp, "motion": cfg.motion,
+            "bin_gap": cfg.bin_gap, "sampler": cfg.sampler, "guides": cfg.guides, "pixel_filter": cfg.pixel_filter,
+            "enclosure": cfg.enclosure}
+
+
+def check_resumable(cfg: SynthConfig, index: int) -> None:
+    """A complete scene is skipped on a rerun, so it must be the scene this command would make: a folder made with
+    other options (another sampler, --enclosure, spp ...) would otherwise end up a silent mix of two recipes."""
+    path = os.path.join(scene_dir(cfg, index), "manifest.json")
+    try:
+        with open(path) as f:
+            manifest = json.load(f)
+    except (OSError, ValueError) as e:
+        raise RanadError(f"unreadable scene manifest ({e}); remove the scene's folder to render it again", path) \
+            from None
+    for key, want in _recipe(cfg, index).items():
+        if key not in manifest and key not in _ABSENT:
+            continue   # written by a version that did not record it
+        have = manifest.get(key, _ABSENT.get(key))
+        if key == "pixel_filter" and isinstance(have, list):   # [filter, the scene's width]
+            have = have[0]
+        if have != want:
+            raise RanadError(f"this scene was made with {key} {have!r}, and this command asks for {want!r}: write "
+                             f"into another folder, or resume with the options it was made with", scene_dir(cfg, index))
+
+
 def run(cfg: SynthConfig, workers: int = 1, progress=None) -> list:
-    """Renders every scene not already complete; returns the manifests written."""
+    """Renders every scene not already complete (after checking the complete ones were made by the same recipe);
+    returns the manifests written."""
     todo = [i for i in range(cfg.scenes) if not is_done(cfg, i)]
+    for i in range(cfg.scenes):
+        if i not in todo:
+            check_resumable(cfg, i)
     os.makedirs(cfg.out, exist_ok=True)
     done = []
     if workers <= 1:
