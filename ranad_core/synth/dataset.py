@@ -183,10 +183,12 @@ def check_resumable(cfg: SynthConfig, index: int) -> None:
 def run(cfg: SynthConfig, workers: int = 1, progress=None) -> list:
     """Renders every scene not already complete (after checking the complete ones were made by the same recipe);
     returns the manifests written."""
-    todo = [i for i in range(cfg.scenes) if not is_done(cfg, i)]
+    todo = []
     for i in range(cfg.scenes):
-        if i not in todo:
+        if is_done(cfg, i):
             check_resumable(cfg, i)
+        else:
+            todo.append(i)
     os.makedirs(cfg.out, exist_ok=True)
     done = []
     if workers <= 1:
