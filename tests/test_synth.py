@@ -403,7 +403,7 @@ def test_an_enclosed_scene_renders_inside_its_room(tmp_path):
                                   ref_spp=16, seed=3, presets=("easy", "studio"), kinds=("deepz",), enclosure=share)
         dataset.run(cfg)
         for i in range(2):
-            root = os.path.join(cfg.out, f"scene_{i:04d}")
+            root = dataset.scene_dir(cfg, i)
             with open(os.path.join(root, "manifest.json")) as f:
                 assert json.load(f).get("enclosed", False) == bool(share)
             img = read_deep(os.path.join(root, "deepz", "noisy_spp4.0000.exr"))

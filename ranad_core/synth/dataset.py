@@ -54,6 +54,11 @@ def scene_seed(seed: int, index: int) -> int:
     return int(np.random.SeedSequence([seed, index]).generate_state(1)[0])
 
 
+def scene_preset(cfg: SynthConfig, index: int) -> str:
+    """The scene's preset or family: cfg.presets in turn."""
+    return cfg.presets[index % len(cfg.presets)]
+
+
 def scene_dir(cfg: SynthConfig, index: int) -> str:
     return os.path.join(cfg.out, f"scene_{index:04d}")
 
@@ -91,7 +96,7 @@ def make_one(cfg: SynthConfig, index: int) -> dict:
 
     t0 = time.perf_counter()
     sseed = scene_seed(cfg.seed, index)
-    preset = cfg.presets[index % len(cfg.presets)]
+    preset = scene_preset(cfg, index)
     spec = make_scene(sseed, preset, cfg.size, cfg.frames, cfg.motion)
     enclosed = enclose(spec, cfg.enclosure)
     centre = cfg.frames // 2
@@ -146,14 +151,14 @@ def make_one(cfg: SynthConfig, index: int) -> dict:
     return manifest
 
 
-# a manifest leaves these out where they have their default: the value to compare when the key is absent
-_ABSENT = {"bin_gap": Z_GAP_REL, "sampler": "independent", "guides": "first-hit", "pixel_filter": "box",
-           "enclosure": 0.0}
+# a manifest leaves these out where they have their default (make_one): compared as SynthConfig's default when absent
+_ABSENT = {k: SynthConfig.__dataclass_fields__[k].default
+           for k in ("bin_gap", "sampler", "guides", "pixel_filter", "enclosure")}
 
 
 def _recipe(cfg: SynthConfig, index: int) -> dict:
     """What a complete scene's manifest must agree on with the command that resumes its folder."""
-    return {"seed": scene_seed(cfg.seed, index), "preset": cfg.presets[index % len(cfg.presets)], "size": cfg.size,
+    return {"seed": scene_seed(cfg.seed, index), "preset": scene_preset(cfg, index), "size": cfg.size,
             "frames": cfg.frames, "spp": list(cfg.spp), "ref_spp": cfg.ref_spp, "motion": cfg.motion,
             "bin_gap": cfg.bin_gap, "sampler": cfg.sampler, "guides": cfg.guides, "pixel_filter": cfg.pixel_filter,
             "enclosure": cfg.enclosure}
