@@ -4,8 +4,8 @@ Default problem (issue 3): a 512x512 layout with 0..6 bins per pixel (mean ~3), 
 channels. Prints forward and forward+backward time, query-key pairs per second, GFLOP/s (4*d FLOPs per
 pair per head, the usual attention count: q.k and p.v, multiply and add), peak memory of the process, and
 the speed-up over the reference on a size the reference can handle (``--ref-size``).
-Torch's allocator is asked for transparent huge pages and freed memory is kept for reuse (heap.py), as the ranad CLI
-does (THP_MEM_ALLOC_ENABLE=0 to compare the first).
+Freed memory is kept for reuse (heap.py) and torch's allocator asks for no transparent huge pages, as in the ranad
+CLI (THP_MEM_ALLOC_ENABLE=1 to compare: see ranad_cli/main.py for why the CLI leaves them off).
 Both memory layouts of q, k, v are measured at --size (see problem()).
 With a GPU, the CUDA kernels run the same problem too; `--device cuda` runs only them: the staged design (the
 default, at each --chunks size) against the one-thread design it replaced, in the same process.
@@ -21,8 +21,7 @@ import resource
 import sys
 import time
 
-os.environ.setdefault("THP_MEM_ALLOC_ENABLE", "1")  # as the ranad CLI does (see ranad_cli/main.py)
-import torch  # noqa: E402
+import torch
 
 sys.path.insert(0, os.path.join(os.path.dirname(__file__), ".."))
 from ranad_core import heap  # noqa: E402

@@ -14,10 +14,13 @@ import signal
 import sys
 import traceback
 
-# Large tensors (hundreds of MB per frame) come from the kernel as fresh pages on every allocation; asking torch's
-# CPU allocator for transparent huge pages cuts the page-fault and zeroing cost (measured in bench/rana.py: the
-# RaNA forward+backward at 512x512 in 1.89 s instead of 2.14 s). Read by torch at its first allocation.
-os.environ.setdefault("THP_MEM_ALLOC_ENABLE", "1")
+# torch's request for transparent huge pages (THP_MEM_ALLOC_ENABLE=1) is left off. It made the RaNA kernels' own
+# benchmark faster (bench/rana.py, forward+backward at 512x512: 1.89 s against 2.14 s when it was adopted; 117 against 108 M
+# pairs/s on a 2-core AVX-512 VM in session 37), where buffers are reused, but a denoise touches most of its memory
+# once, and on such a VM each fresh huge page took milliseconds to fault in (the host backs it 4 KB at a time):
+# the held-out 1080p frame (`ranad denoise F --profile`, F from bench/denoise.py --frame) 24.3-24.8 s without it
+# against 25.5-26.1 s with it (three runs each, alternating; system time 2.0 s against 4.6 s), and 40 training steps
+# 25.0-25.8 s against 27.1-27.5 s. A user's own setting is read by torch as before.
 # numpy's own request for huge pages (madvise on every array of 4 MB or more) did the opposite on a 2-core AVX-512
 # VM: faulting in a fresh 221 MB array took 0.42 s against 0.09 s without it, and the held-out 1080p frame
 # (`ranad denoise F --profile`, F from bench/denoise.py --frame) 30.0 s against 28.0 s. Read when numpy is first
