@@ -195,7 +195,7 @@ def denoise_cmd(inputs, output, frames, model, device, threads, kind, maps, pres
     gc.freeze()
     click.get_current_context().call_on_close(gc.unfreeze)
     opts.model_spec, opts.window = model, window or training_window(loaded)
-    _, mapping, found, labels = first_frame(frames_list[0].path, opts)
+    mapping, found, labels, preread = first_frame(frames_list[0].path, opts)[1:]   # the image: only in preread
     click.echo(f"model {loaded.model_id}; {'deep-OID' if found == 'deepoid' else 'deep-Z'} input"
                f"{'' if kind == 'auto' else ' (--kind ' + kind + ', checked on every frame)'}; "
                + (f"parts: {', '.join(labels)} (the others copied); " if labels else "")
@@ -227,7 +227,8 @@ def denoise_cmd(inputs, output, frames, model, device, threads, kind, maps, pres
         from ranad_core.profile import profiling
 
         with profiling() if profile else contextlib.nullcontext() as prof:
-            summary = denoise_shot(jobs, loaded, opts, fbar.update, _TileBar(tbar), on_frame, sequence, warn)
+            summary = denoise_shot(jobs, loaded, opts, fbar.update, _TileBar(tbar), on_frame, sequence, warn,
+                                   preread)
     for msg in summary.messages:
         if msg not in warned:
             click.echo(f"ranad: warning: {msg}", err=True)

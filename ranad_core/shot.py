@@ -169,14 +169,16 @@ def prescan(frames, opts: "ShotOptions | None" = None) -> None:
 def first_frame(path: str, opts: "ShotOptions"):
     """What a shot's report starts with, from its first frame: (the first part to denoise, its ChannelMap, its
     kind 'deepz'/'deepoid' (checked against opts.kind), the labels of the parts denoised, or [] for a
-    single-part file)."""
+    single-part file, and {(path, part): the image}, which denoise_shot's `preread` takes so that the frame is
+    not read a second time: a whole read, 0.8 s of a 1080p frame)."""
     layout = read_header(path)
     chosen = select_parts(layout, path, opts.parts, opts.overrides)
-    img = read_deep(path, part=part_key(layout, chosen[0]) if layout.multipart else None)
+    part = part_key(layout, chosen[0]) if layout.multipart else None
+    img = read_deep(path, part=part)
     mapping = detect(img, opts.overrides, path)
     found = check_kind(img, opts.kind, path)
     labels = [part_label(layout, i) for i in chosen] if layout.multipart else []
-    return img, mapping, found, labels
+    return img, mapping, found, labels, {(path, part): img}
 
 
 def choose_frame_tile(images, centre, halo: int, max_memory: float, where: str,
@@ -244,8 +246,10 @@ class FrameStore:
     """Frames (one deep part each) read once and kept while a window may still need them (the shot is processed
     in order), with each frame's flat prior once a cross-frame window has made it (denoise.FramePrior)."""
 
-    def __init__(self, keep: int):
-        self.keep, self.images, self.priors = max(1, keep), {}, {}
+    def __init__(self, keep: int, preread: dict | None = None):
+        # preread ({(path, part): image}, frames read before the shot) is taken over, not copied: evicting a frame
+        # drops the caller's reference too, so a long shot does not keep its first frame to the end
+        self.keep, self.images, self.priors = max(1, keep), preread if preread is not None else {}, {}
 
     def get(self, frame, part=None):
         key = (frame.path, part)
@@ -334,12 +338,13 @@ def no_motion_message(img, model_name: str = "the cross-frame model") -> str:
 
 
 def denoise_shot(jobs, loaded, opts: ShotOptions, frame_bar=None, tile_bar=None, on_frame=None,
-                 sequence: list | None = None, warn=None) -> ShotSummary:
+                 sequence: list | None = None, warn=None, preread: dict | None = None) -> ShotSummary:
     """jobs: [(Frame, output path)]; loaded: model.store.LoadedModel; `sequence`: every frame of the shot (the
     neighbours of a shard's frames; default: the jobs' frames). `frame_bar`/`tile_bar`: callables (n) for
     progress; `tile_bar.reset(total)` is called per part of each frame when present. `on_frame(job, image,
     result)` is called after each frame is written (with its first denoised part); `warn(message)` as soon as a
-    warning arises (it is kept in the summary too).
+    warning arises (it is kept in the summary too). `preread`: {(path, part key or None): DeepImage} of frames
+    already read (first_frame's), which the frame store starts with instead of reading them again.
 
     Every deep part `select_parts` picks (--part, or each deep part with colour) is denoised with the same part
     of the neighbouring frames (found by name, else by index); the output holds every part of the input, the
@@ -368,7 +373,7 @@ def denoise_shot(jobs, loaded, opts: ShotOptions, frame_bar=None, tile_bar=None,
         chosen = select_parts(layout, frame.path, opts.parts, opts.overrides)
         check_copyable_parts(frame.path, layout, chosen)   # the parts copied as they are: fail now, not at the write
         if store is None:
-            store = FrameStore((window + 1) * len(chosen))
+            store = FrameStore((window + 1) * len(chosen), preread)
         replaced, reported = {}, False
         for index in chosen:
             key = part_key(layout, index)

@@ -135,6 +135,27 @@ def test_the_cycle_collector_skips_what_was_loaded_and_thaws_afterwards(tmp_path
     assert gc.get_freeze_count() == 0
 
 
+def test_every_frame_is_read_once(tmp_path, model_file, monkeypatch):
+    """The first frame, read before the shot for its channel map and kind, is the frame the shot denoises: it is
+    not read a second time (a whole read, 0.8 s of a 1080p frame), and the output is what a fresh read gives."""
+    reads = []
+    real = shot_mod.read_deep
+
+    def spy(path, *a, **k):
+        reads.append(os.path.basename(str(path)))
+        return real(path, *a, **k)
+
+    monkeypatch.setattr(shot_mod, "read_deep", spy)
+    r = run("denoise", SHOT / "noisy_spp16.####.exr", "-o", tmp_path / "s.####.exr", "--model", model_file)
+    assert r.exit_code == 0, r.output
+    assert sorted(reads) == [f"noisy_spp16.000{i}.exr" for i in range(3)]
+    reads.clear()
+    r = run("denoise", FRAME, "-o", tmp_path / "one.exr", "--model", model_file)
+    assert r.exit_code == 0, r.output
+    assert reads == [FRAME.name]
+    np.testing.assert_array_equal(read_deep(tmp_path / "one.exr").values, read_deep(tmp_path / "s.0001.exr").values)
+
+
 def spy_on_tile_choice(monkeypatch) -> list:
     """Records (budget, tile) of every tile choice shot.py makes (the real choice still decides)."""
     calls = []
