@@ -141,11 +141,10 @@ def denoise_cmd(inputs, output, frames, model, device, threads, kind, maps, pres
     import torch
 
     from ranad_core.channels import mapping_options
-    from ranad_core.exr import read_deep
-    from ranad_core.exr.sequence import expand_inputs, format_frame, is_pattern, output_paths, shard as take_shard
+    from ranad_core.exr.sequence import expand_inputs, is_pattern, output_paths, shard as take_shard
     from ranad_core.fileutil import check_writable_target
     from ranad_core.model.store import load_model, training_window
-    from ranad_core.shot import ShotOptions, denoise_shot, first_frame, prescan
+    from ranad_core.shot import ShotOptions, prescan
 
     from ranad_core.device import resolve
 
@@ -195,6 +194,22 @@ def denoise_cmd(inputs, output, frames, model, device, threads, kind, maps, pres
     gc.freeze()
     click.get_current_context().call_on_close(gc.unfreeze)
     opts.model_spec, opts.window = model, window or training_window(loaded)
+    from ranad_core.profile import profiling
+
+    # the profile starts before the first frame's read (the shot reuses that image, shot.Preread)
+    with profiling() if profile else contextlib.nullcontext() as prof:
+        _denoise_frames(frames_list, jobs, sequence, loaded, opts, kind, flow, flow_direction, run_on, reference,
+                        prof)
+
+
+def _denoise_frames(frames_list, jobs, sequence, loaded, opts, kind, flow, flow_direction, run_on, reference, prof):
+    """The shot's report line, the frames through denoise_shot with progress bars, and the closing lines."""
+    import torch
+
+    from ranad_core.exr import read_deep
+    from ranad_core.exr.sequence import format_frame
+    from ranad_core.shot import denoise_shot, first_frame
+
     mapping, found, labels, preread = first_frame(frames_list[0].path, opts)[1:]   # the image: only in preread
     click.echo(f"model {loaded.model_id}; {'deep-OID' if found == 'deepoid' else 'deep-Z'} input"
                f"{'' if kind == 'auto' else ' (--kind ' + kind + ', checked on every frame)'}; "
@@ -224,11 +239,7 @@ def denoise_cmd(inputs, output, frames, model, device, threads, kind, maps, pres
             warned.append(msg)
             tqdm.write(f"ranad: warning: {msg}", file=sys.stderr)
 
-        from ranad_core.profile import profiling
-
-        with profiling() if profile else contextlib.nullcontext() as prof:
-            summary = denoise_shot(jobs, loaded, opts, fbar.update, _TileBar(tbar), on_frame, sequence, warn,
-                                   preread)
+        summary = denoise_shot(jobs, loaded, opts, fbar.update, _TileBar(tbar), on_frame, sequence, warn, preread)
     for msg in summary.messages:
         if msg not in warned:
             click.echo(f"ranad: warning: {msg}", err=True)
@@ -238,7 +249,7 @@ def denoise_cmd(inputs, output, frames, model, device, threads, kind, maps, pres
                + (f"; {summary.dropped} neighbour bin(s) carried out of the frame by motion (not used)"
                   if summary.dropped else "")
                + ("; WITHOUT motion compensation (no motion channels)" if summary.no_motion else ""))
-    if profile:
+    if prof is not None:
         click.echo(f"\nprofile ({torch.get_num_threads()} thread(s)):\n{prof.table()}")
     for path, before, after in scores:
         click.echo(f"{os.path.basename(path)}: flattened SMAPE vs reference {before:.4f} -> {after:.4f} "

@@ -166,19 +166,30 @@ def prescan(frames, opts: "ShotOptions | None" = None) -> None:
                                  "(frames of a sequence must share a display window)", frame.path)
 
 
+@dataclass
+class Preread:
+    """Frames read before the shot (first_frame's): denoise_shot's frame store starts with them instead of reading
+    them again (a whole read, 0.8 s of a 1080p frame), and the shot's seconds count the time their read took."""
+    images: dict            # (path, part key or None) -> DeepImage; the frame store takes the dict over
+    seconds: float = 0.0
+
+
 def first_frame(path: str, opts: "ShotOptions"):
     """What a shot's report starts with, from its first frame: (the first part to denoise, its ChannelMap, its
     kind 'deepz'/'deepoid' (checked against opts.kind), the labels of the parts denoised, or [] for a
-    single-part file, and {(path, part): the image}, which denoise_shot's `preread` takes so that the frame is
-    not read a second time: a whole read, 0.8 s of a 1080p frame)."""
+    single-part file, and the Preread that hands the image on to denoise_shot). The read is a "read" stage of an
+    active profile."""
     layout = read_header(path)
     chosen = select_parts(layout, path, opts.parts, opts.overrides)
     part = part_key(layout, chosen[0]) if layout.multipart else None
-    img = read_deep(path, part=part)
+    t0 = time.perf_counter()
+    with stage("read"):
+        img = read_deep(path, part=part)
+    seconds = time.perf_counter() - t0
     mapping = detect(img, opts.overrides, path)
     found = check_kind(img, opts.kind, path)
     labels = [part_label(layout, i) for i in chosen] if layout.multipart else []
-    return img, mapping, found, labels, {(path, part): img}
+    return img, mapping, found, labels, Preread({(path, part): img}, seconds)
 
 
 def choose_frame_tile(images, centre, halo: int, max_memory: float, where: str,
@@ -338,18 +349,18 @@ def no_motion_message(img, model_name: str = "the cross-frame model") -> str:
 
 
 def denoise_shot(jobs, loaded, opts: ShotOptions, frame_bar=None, tile_bar=None, on_frame=None,
-                 sequence: list | None = None, warn=None, preread: dict | None = None) -> ShotSummary:
+                 sequence: list | None = None, warn=None, preread: Preread | None = None) -> ShotSummary:
     """jobs: [(Frame, output path)]; loaded: model.store.LoadedModel; `sequence`: every frame of the shot (the
     neighbours of a shard's frames; default: the jobs' frames). `frame_bar`/`tile_bar`: callables (n) for
     progress; `tile_bar.reset(total)` is called per part of each frame when present. `on_frame(job, image,
     result)` is called after each frame is written (with its first denoised part); `warn(message)` as soon as a
-    warning arises (it is kept in the summary too). `preread`: {(path, part key or None): DeepImage} of frames
-    already read (first_frame's), which the frame store starts with instead of reading them again.
+    warning arises (it is kept in the summary too). `preread`: frames already read (first_frame's Preread), which
+    the frame store starts with instead of reading them again.
 
     Every deep part `select_parts` picks (--part, or each deep part with colour) is denoised with the same part
     of the neighbouring frames (found by name, else by index); the output holds every part of the input, the
     others copied byte for byte (exr.write_parts). Each frame keeps its own data window."""
-    summary = ShotSummary()
+    summary = ShotSummary(seconds=preread.seconds if preread else 0.0)
     heap.set_ceiling(opts.max_memory)   # kept freed memory goes back before it nears the ceiling (heap.relieve)
     model = loaded.model
     halo = halo_for(model) if opts.halo is None else opts.halo
@@ -373,7 +384,7 @@ def denoise_shot(jobs, loaded, opts: ShotOptions, frame_bar=None, tile_bar=None,
         chosen = select_parts(layout, frame.path, opts.parts, opts.overrides)
         check_copyable_parts(frame.path, layout, chosen)   # the parts copied as they are: fail now, not at the write
         if store is None:
-            store = FrameStore((window + 1) * len(chosen), preread)
+            store = FrameStore((window + 1) * len(chosen), preread.images if preread else None)
         replaced, reported = {}, False
         for index in chosen:
             key = part_key(layout, index)

@@ -393,6 +393,23 @@ def test_profile_reports_every_stage_and_changes_nothing(tmp_path, model_file):
     assert float(m.group(4)) == pytest.approx(sum(windows) / img.num_bins, abs=0.01)
 
 
+def test_the_first_frames_read_counts_in_the_profile_and_the_time(tmp_path, model_file, monkeypatch):
+    """The first frame is read before the shot (for the report) and not again: that read is still the profile's
+    "read" stage and part of the "denoised ... in N s" time (a read made slow here shows in both)."""
+    real = shot_mod.read_deep
+
+    def slow(*a, **k):
+        time.sleep(0.5)
+        return real(*a, **k)
+
+    monkeypatch.setattr(shot_mod, "read_deep", slow)
+    r = run("denoise", FRAME, "-o", tmp_path / "p.exr", "--model", model_file, "--profile")
+    assert r.exit_code == 0, r.output
+    read = re.search(r"^\| read \| ([\d.]+) \|", r.output, re.M)
+    assert read and 0.5 <= float(read.group(1)) < 1.0, r.output   # one read: the frame's
+    assert float(re.search(r"denoised 1 frame\(s\), \d+ bins, in ([\d.]+) s", r.output).group(1)) >= 0.5
+
+
 def test_profile_cpu_seconds_tell_a_waiting_stage_from_a_working_one():
     """The profile's CPU seconds are the process's, per stage: a stage that sleeps keeps no thread busy, one that
     computes keeps one busy."""
