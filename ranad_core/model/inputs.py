@@ -152,27 +152,43 @@ def prepare(img: DeepImage, z_stats: tuple[float, float] | None = None, features
     """Features and noisy layers of a deep image whose bins are in front-to-back order within each pixel.
     `z_stats`: the log-depth standardisation (default: this image's own, see `depth_stats`); `features`: the
     feature set (FEATURE_SETS); `scale`: the frame's exposure scale ("prior" features; prior.frame_scale of the
-    whole frame, so that tiles and crops agree)."""
+    whole frame, so that tiles and crops agree).
+
+    The channels it reads are taken from the bins' rows in one gather (a take per channel group read every row
+    of the image once per group) and the blocks are concatenated once (the radiance and guide blocks were joined
+    first, then joined again with the encodings). Each value is computed as before (log1p and log on fresh
+    contiguous arrays), so the features are bitwise the same (tests/test_inputs.py keeps the earlier version as
+    the oracle)."""
     if features not in FEATURE_SETS:
         raise ValueError(f"unknown feature set {features!r} (known: {', '.join(FEATURE_SETS)})")
     inv = 1.0 / scale if features == "prior" else 1.0
     n = img.values.shape[0]
-    layers = {}
-    for name, names in RADIANCE_LAYERS.items():
-        layers[name] = _cols(img, names) if _has(img, names) else np.zeros((n, 3), np.float32)
-    layers["alpha"] = _cols(img, [ALPHA])
-    layers["depth"] = _cols(img, [DEPTH])
-    cov = _cols(img, [COVERAGE]) if COVERAGE in img.channels else contribution(layers["alpha"], img.offsets)
+    groups = {"diffuse": DIFFUSE, "specular": SPECULAR, "alpha": (ALPHA,), "depth": (DEPTH,),
+              "coverage": (COVERAGE,), "albedo": ALBEDO, "normal": NORMAL}
+    if features == "prior":
+        groups.update(prior=PRIOR, flat=FLAT_NOISY)
+    # alpha and depth are required (channel_index names a missing one); the other groups are optional
+    present = {k: v for k, v in groups.items() if k in ("alpha", "depth") or _has(img, v)}
+    raw = np.take(img.values, [img.channel_index(c) for v in present.values() for c in v], axis=1)
+    raw = raw.astype(np.float32, copy=False)
+    col, at = {}, 0
+    for k, v in present.items():
+        col[k] = raw[:, at:at + len(v)]
+        at += len(v)
+
+    def group(name: str, width: int) -> np.ndarray:   # a group's columns, contiguous; zeros where it is absent
+        return np.ascontiguousarray(col[name]) if name in col else np.zeros((n, width), np.float32)
+
+    layers = {"diffuse": group("diffuse", 3), "specular": group("specular", 3), "alpha": group("alpha", 1),
+              "depth": group("depth", 1)}
+    cov = group("coverage", 1) if "coverage" in col else contribution(layers["alpha"], img.offsets)
     mean, std = depth_stats(img) if z_stats is None else z_stats
     zn = ((np.log(np.maximum(layers["depth"], 1e-4)) - mean) / (std + 1e-6)).astype(np.float32)
-    aux = [_cols(img, names) if _has(img, names) else np.zeros((n, 3), np.float32) for names in AUX.values()]
     rad = lambda x: np.log1p(np.maximum(np.asarray(x, np.float32) * np.float32(inv), 0))  # noqa: E731
-    extra = []
+    blocks = [rad(layers["diffuse"]), rad(layers["specular"]), layers["alpha"], cov, zn, group("albedo", 3),
+              group("normal", 3)]
     if features == "prior":
-        for names in (PRIOR, FLAT_NOISY):
-            extra.append(rad(_cols(img, names)) if _has(img, names) else np.zeros((n, 3), np.float32))
-    base = np.concatenate([rad(layers["diffuse"]), rad(layers["specular"]), layers["alpha"], cov, zn, *aux,
-                           *extra], axis=1)
+        blocks += [rad(group("prior", 3)), rad(group("flat", 3))]
     layout = Layout.of(torch.from_numpy(img.offsets), img.height, img.width)
     y, x = layout.pixels[:, 0].float(), layout.pixels[:, 1].float()
     pos = [f(2 * math.pi * t / p) for p in PERIODS for t in (x, y) for f in (torch.sin, torch.cos)]
@@ -181,8 +197,10 @@ def prepare(img: DeepImage, z_stats: tuple[float, float] | None = None, features
     b = (torch.arange(layout.bins) - torch.repeat_interleave(offs[:-1], counts, output_size=layout.bins)).float()
     nb = torch.repeat_interleave(counts, counts, output_size=layout.bins).float()
     bins = [f(b * math.pi / 2 ** k) for k in range(BIN_FREQS) for f in (torch.sin, torch.cos)]
-    feats = torch.cat([torch.from_numpy(base), torch.stack(pos, 1), torch.stack(bins, 1),
+    feats = torch.cat([*(torch.from_numpy(blk) for blk in blocks), torch.stack(pos, 1), torch.stack(bins, 1),
                        (b / nb.clamp(min=1)).unsqueeze(1)], dim=1)
-    mod = modulation(img)
+    mod = None
+    if "albedo" in col and _has(img, SPECULAR):   # modulation(img), from the columns taken above
+        mod = (np.clip(np.nan_to_num(col["albedo"]), 0, 1) + np.float32(DEMOD_FLOOR)).astype(np.float32)
     tensors = {k: torch.from_numpy(v) for k, v in layers.items()}
     return ModelInputs(layout, feats, tensors, None if mod is None else torch.from_numpy(mod), tensors["depth"])
