@@ -400,7 +400,8 @@ def _denoise_window(model, images, centre, mapping, tile, halo, keep_noisy, want
                                 embs[f] = np.zeros((fr.srt.num_bins, feats[f].shape[1]), np.float16)
                             kf = _core_mask(local, win, core)
                             embs[f][idx[kf]] = feats[f].cpu().numpy()[kf].astype(np.float16)
-                record_tile(sum(int(p[1].size) for p in parts), int(keep.sum()), time.perf_counter() - t_tile)
+                record_tile(int(parts[centre][1].size), int(keep.sum()), time.perf_counter() - t_tile,
+                            sum(int(p[1].size) for p in parts))
         heap.relieve()
         if progress:
             progress(1)

@@ -23,7 +23,9 @@ class Profile:
     seconds: dict = field(default_factory=dict)
     cpu: dict = field(default_factory=dict)        # process CPU seconds (every thread's) per stage
     calls: dict = field(default_factory=dict)
-    tiles: list = field(default_factory=list)      # (bins in the haloed window, core bins, seconds)
+    # per tile: (the centre frame's bins in the haloed window, its core bins, seconds, the bins of every frame's
+    # window: more than the first for a cross-frame window)
+    tiles: list = field(default_factory=list)
 
     def add(self, name: str, secs: float, cpu_secs: float = 0.0) -> None:
         self.seconds[name] = self.seconds.get(name, 0.0) + secs
@@ -51,11 +53,13 @@ class Profile:
             bins = [t[0] for t in self.tiles]
             core = sum(t[1] for t in self.tiles)
             secs = [t[2] for t in self.tiles]
+            window = [t[3] for t in self.tiles]
             lines.append("")
             lines.append(f"{len(self.tiles)} tile(s): {min(bins)}-{max(bins)} bins with the halo, "
-                         f"{sum(bins) / max(core, 1):.2f}x the frame's bins computed (halo overlap); "
-                         f"{min(secs):.2f}-{max(secs):.2f} s per tile, {1e6 * sum(secs) / max(sum(bins), 1):.1f} us "
-                         "per haloed bin")
+                         f"{sum(bins) / max(core, 1):.2f}x the frame's bins computed (halo overlap)"
+                         + (f", {min(window)}-{max(window)} with the window's other frames" if window != bins else "")
+                         + f"; {min(secs):.2f}-{max(secs):.2f} s per tile, "
+                         f"{1e6 * sum(secs) / max(sum(window), 1):.1f} us per haloed bin")
         return "\n".join(lines)
 
 
@@ -75,9 +79,11 @@ def stage(name: str):
         _active.add(name, time.perf_counter() - t, time.process_time() - c)
 
 
-def record_tile(bins: int, core_bins: int, seconds: float) -> None:
+def record_tile(bins: int, core_bins: int, seconds: float, window_bins: int | None = None) -> None:
+    """A tile of the active profile: the centre frame's bins with the halo and in the core, its seconds, and the
+    bins of every frame of its window (default: the centre's alone)."""
     if _active is not None:
-        _active.tiles.append((bins, core_bins, seconds))
+        _active.tiles.append((bins, core_bins, seconds, bins if window_bins is None else window_bins))
 
 
 @contextlib.contextmanager

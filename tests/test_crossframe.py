@@ -211,6 +211,23 @@ def cross_model_file(cross, path, **metadata) -> Path:
     return path
 
 
+def test_the_profile_tells_the_halo_from_the_windows_other_frames(tmp_path):
+    """--profile on a cross-frame shot: the halo overlap is the centre frame's (whole-frame tiles: 1.00x), and the
+    neighbours' bins a tile also holds are named apart (they were counted as halo overlap: 2-3x)."""
+    _, cross = small_models()
+    model = cross_model_file(cross, tmp_path / "xf.safetensors")
+    r = CliRunner().invoke(cli, ["denoise", str(SHOT / "noisy_spp16.####.exr"), "-o", str(tmp_path / "d.####.exr"),
+                                 "--model", str(model), "--profile", "--bin-merge", "0"])   # the files' own bins
+    assert r.exit_code == 0, r.output
+    m = re.search(r"3 tile\(s\): (\d+)-(\d+) bins with the halo, ([\d.]+)x the frame's bins computed \(halo "
+                  r"overlap\), (\d+)-(\d+) with the window's other frames;", r.output)
+    assert m, r.output
+    b = [read_deep(SHOT / f"noisy_spp16.000{i}.exr").num_bins for i in range(3)]
+    assert (int(m.group(1)), int(m.group(2))) == (min(b), max(b)) and float(m.group(3)) == 1.0
+    # every window holds a neighbour's bins besides its own, at most the three frames' (motion carries some out)
+    assert max(b) < int(m.group(4)) <= int(m.group(5)) <= sum(b)
+
+
 def test_denoise_with_a_window_caches_every_frame(tmp_path):
     _, cross = small_models()
     model = cross_model_file(cross, tmp_path / "xf.safetensors")
