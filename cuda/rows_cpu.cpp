@@ -339,3 +339,33 @@ torch::Tensor rows_scale_mix(torch::Tensor feat, torch::Tensor wt, torch::Tensor
   });
   return out;
 }
+
+torch::Tensor rows_concat(std::vector<torch::Tensor> parts) {
+  TORCH_CHECK(!parts.empty(), "rows_concat: no parts");
+  const int64_t n = parts[0].size(0);
+  std::vector<const float*> src;
+  std::vector<int64_t> width;
+  int64_t total = 0;
+  for (auto& p : parts) {
+    TORCH_CHECK(p.device().is_cpu() && p.scalar_type() == torch::kFloat && p.dim() == 2 && p.is_contiguous(),
+                "rows_concat: contiguous float32 [N, C] CPU tensors expected");
+    TORCH_CHECK(p.size(0) == n, "rows_concat: parts of ", p.size(0), " and ", n, " rows");
+    src.push_back(p.data_ptr<float>());
+    width.push_back(p.size(1));
+    total += p.size(1);
+  }
+  auto out = torch::empty({n, total}, parts[0].options());
+  float* op = out.data_ptr<float>();
+  over_tiles(n, [&](int64_t r0, int64_t rows) {
+    int64_t at = 0;
+    for (size_t k = 0; k < src.size(); ++k) {
+      const int64_t w = width[k];
+      const float* s = src[k] + r0 * w;
+      float* d = op + r0 * total + at;
+      for (int64_t r = 0; r < rows; ++r)
+        for (int64_t j = 0; j < w; ++j) d[r * total + j] = s[r * w + j];
+      at += w;
+    }
+  });
+  return out;
+}

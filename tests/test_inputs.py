@@ -87,11 +87,35 @@ def frame():
     return canonical_sorted(read_deep(SHOT / "noisy_spp16.0001.exr"))
 
 
+@pytest.mark.parametrize("kernels", [True, False], ids=["C++ concat", "torch.cat"])
 @pytest.mark.parametrize("features", FEATURE_SETS)
-def test_features_equal_the_column_by_column_oracle(frame, features):
+def test_features_equal_the_column_by_column_oracle(frame, features, kernels, monkeypatch):
+    """With the C++ kernels (their one-pass concatenation) and without them (torch.cat)."""
+    from ranad_core.rana import extension
+
+    if kernels and extension.cpu_extension_or_none() is None:
+        pytest.skip("the C++ kernels are not built here (no compiler); the torch.cat case still runs")
+    if not kernels:
+        monkeypatch.setattr(extension, "cpu_extension_or_none", lambda: None)
     img = with_prior(frame) if features == "prior" else frame
     assert_same(img, features=features, scale=0.37)
     assert_same(img, z_stats=(0.5, 2.0), features=features, scale=3.0)
+
+
+def test_the_one_pass_concatenation_is_torch_cat():
+    from ranad_core.rana.extension import cpu_extension_or_none
+
+    ext = cpu_extension_or_none()
+    if ext is None:
+        pytest.skip("the C++ kernels are not built here (no compiler)")
+    g = torch.Generator().manual_seed(0)
+    for n in (0, 1, 63, 64, 65, 1000):
+        parts = [torch.randn(n, w, generator=g) for w in (3, 1, 16, 7, 1)]
+        assert torch.equal(ext.rows_concat(parts), torch.cat(parts, 1))
+    with pytest.raises(RuntimeError, match="rows"):
+        ext.rows_concat([torch.zeros(3, 2), torch.zeros(4, 2)])
+    with pytest.raises(RuntimeError, match="contiguous float32"):
+        ext.rows_concat([torch.zeros(3, 2).t()])
 
 
 def test_without_guides_split_or_coverage(frame):
