@@ -383,8 +383,8 @@ def denoise_shot(jobs, loaded, opts: ShotOptions, frame_bar=None, tile_bar=None,
         layout = read_header(frame.path)
         chosen = select_parts(layout, frame.path, opts.parts, opts.overrides)
         check_copyable_parts(frame.path, layout, chosen)   # the parts copied as they are: fail now, not at the write
-        if store is None:
-            store = FrameStore((window + 1) * len(chosen), preread.images if preread else None)
+        if store is None:   # a window's frames and no more: the next window reads one new frame, sliding on
+            store = FrameStore(window * len(chosen), preread.images if preread else None)
         replaced, reported = {}, False
         for index in chosen:
             key = part_key(layout, index)
@@ -445,6 +445,9 @@ def denoise_shot(jobs, loaded, opts: ShotOptions, frame_bar=None, tile_bar=None,
         summary.seconds += time.perf_counter() - t0
         if on_frame:
             on_frame((frame, out), *pending)
+        # this frame's arrays (its images, results and output, a frame's size each) go before the next frame is
+        # read and prepared, which --max-memory's accounting counts without them
+        images = img = result = replaced = pending = flows = priors = None
         if frame_bar:
             frame_bar(1)
     return summary
