@@ -15,12 +15,12 @@ import sys
 import traceback
 
 # torch's request for transparent huge pages (THP_MEM_ALLOC_ENABLE=1) is left off. It made the RaNA kernels' own
-# benchmark faster (bench/rana.py, forward+backward at 512x512: 1.89 s against 2.14 s when it was adopted; 117 against 108 M
-# pairs/s on a 2-core AVX-512 VM in session 37), where buffers are reused, but a denoise touches most of its memory
-# once, and on such a VM each fresh huge page took milliseconds to fault in (the host backs it 4 KB at a time):
-# the held-out 1080p frame (`ranad denoise F --profile`, F from bench/denoise.py --frame) 24.3-24.8 s without it
-# against 25.5-26.1 s with it (three runs each, alternating; system time 2.0 s against 4.6 s), and 40 training steps
-# 25.0-25.8 s against 27.1-27.5 s. A user's own setting is read by torch as before.
+# benchmark faster (bench/rana.py, forward+backward at 512x512: 1.89 s against 2.14 s when it was adopted; 117
+# against 108 M pairs/s on a 2-core AVX-512 VM in session 37), where buffers are reused, but a denoise touches most
+# of its memory once, and on such a VM each fresh huge page took milliseconds to fault in (the host backs it 4 KB
+# at a time): the held-out 1080p frame (`ranad denoise F --profile`, F from bench/denoise.py --frame) 24.3-24.8 s
+# without it against 25.5-26.1 s with it (three runs each, alternating; system time 1.9-2.2 s against 4.4-4.8 s),
+# and 40 training steps 25.0-25.8 s against 27.1-27.5 s. A user's own setting is read by torch as before.
 # numpy's own request for huge pages (madvise on every array of 4 MB or more) did the opposite on a 2-core AVX-512
 # VM: faulting in a fresh 221 MB array took 0.42 s against 0.09 s without it, and the held-out 1080p frame
 # (`ranad denoise F --profile`, F from bench/denoise.py --frame) 30.0 s against 28.0 s. Read when numpy is first

@@ -125,7 +125,12 @@ def modulation(img: DeepImage) -> np.ndarray | None:
     specular light included, which the diffuse albedo does not modulate)."""
     if not (_has(img, ALBEDO) and _has(img, SPECULAR)):
         return None
-    return (np.clip(np.nan_to_num(_cols(img, ALBEDO)), 0, 1) + np.float32(DEMOD_FLOOR)).astype(np.float32)
+    return _modulation_of(_cols(img, ALBEDO))
+
+
+def _modulation_of(albedo: np.ndarray) -> np.ndarray:
+    """[N, 3] the modulation of albedo columns: clipped to [0, 1], NaN as 0, plus DEMOD_FLOOR."""
+    return (np.clip(np.nan_to_num(albedo), 0, 1) + np.float32(DEMOD_FLOOR)).astype(np.float32)
 
 
 def depth_stats(img: DeepImage) -> tuple[float, float]:
@@ -168,15 +173,14 @@ def prepare(img: DeepImage, z_stats: tuple[float, float] | None = None, features
 
     The channels it reads are taken from the bins' rows in one gather (a take per channel group read every row
     of the image once per group) and the blocks are concatenated once, in one pass (`_columns`; the radiance and
-    guide blocks were joined first, then joined again with the stacked encodings). Each value is computed as before (log1p and log on fresh
-    contiguous arrays), so the features are bitwise the same (tests/test_inputs.py keeps the earlier version as
-    the oracle)."""
+    guide blocks were joined first, then joined again with the stacked encodings). Each value is computed as
+    before (log1p and log on fresh contiguous arrays), so the features are bitwise the same (tests/test_inputs.py
+    keeps the earlier version as the oracle)."""
     if features not in FEATURE_SETS:
         raise ValueError(f"unknown feature set {features!r} (known: {', '.join(FEATURE_SETS)})")
     inv = 1.0 / scale if features == "prior" else 1.0
     n = img.values.shape[0]
-    groups = {"diffuse": DIFFUSE, "specular": SPECULAR, "alpha": (ALPHA,), "depth": (DEPTH,),
-              "coverage": (COVERAGE,), "albedo": ALBEDO, "normal": NORMAL}
+    groups = {**RADIANCE_LAYERS, "alpha": (ALPHA,), "depth": (DEPTH,), "coverage": (COVERAGE,), **AUX}
     if features == "prior":
         groups.update(prior=PRIOR, flat=FLAT_NOISY)
     # alpha and depth are required (channel_index names a missing one); the other groups are optional
@@ -210,8 +214,6 @@ def prepare(img: DeepImage, z_stats: tuple[float, float] | None = None, features
     nb = torch.repeat_interleave(counts, counts, output_size=layout.bins).float()
     bins = [f(b * math.pi / 2 ** k) for k in range(BIN_FREQS) for f in (torch.sin, torch.cos)]
     feats = _columns([*(torch.from_numpy(blk) for blk in blocks), *pos, *bins, b / nb.clamp(min=1)])
-    mod = None
-    if "albedo" in col and _has(img, SPECULAR):   # modulation(img), from the columns taken above
-        mod = (np.clip(np.nan_to_num(col["albedo"]), 0, 1) + np.float32(DEMOD_FLOOR)).astype(np.float32)
+    mod = _modulation_of(col["albedo"]) if "albedo" in col and "specular" in col else None   # modulation(img)
     tensors = {k: torch.from_numpy(v) for k, v in layers.items()}
     return ModelInputs(layout, feats, tensors, None if mod is None else torch.from_numpy(mod), tensors["depth"])
