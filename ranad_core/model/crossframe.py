@@ -207,7 +207,9 @@ class CrossFrameRaNAD(nn.Module):
         if self.input_keys and len(frames) > 1:   # split the centre's [backbone | keys] (see embeddings)
             dim = self.config.dim
             feats = list(feats)
-            own, feats[centre] = feats[centre][:, :dim], feats[centre][:, dim:]
+            # each part made contiguous once: as column views, every fused layer that reads them copied them again
+            # (0.4 s of bench/shot.py's 5-frame 480x270 shot)
+            own, feats[centre] = feats[centre][:, :dim].contiguous(), feats[centre][:, dim:].contiguous()
         else:
             own = feats[centre]
         match = {}
