@@ -141,3 +141,17 @@ def test_alpha_and_depth_stay_required(frame):
     keep = [c for c in frame.channels if c != ALPHA]
     with pytest.raises(KeyError, match="no channel 'A'"):
         prepare(frame.with_values(frame.columns(keep), keep))
+
+
+def test_concat_columns_keeps_gradients_and_matches_torch_cat():
+    """concat_columns (the features' and the cross-frame one-hot's joins) takes the C++ pass only for float32 CPU
+    tensors without gradients; a tensor that needs them goes through torch.cat and its gradient flows."""
+    from ranad_core.model.inputs import concat_columns
+
+    g = torch.Generator().manual_seed(1)
+    parts = [torch.randn(9, 4, generator=g), torch.randn(9, generator=g), torch.randn(9, 2, generator=g)]
+    assert torch.equal(concat_columns(parts), torch.cat([parts[0], parts[1][:, None], parts[2]], 1))
+    leaf = torch.randn(9, 4, generator=g, requires_grad=True)
+    out = concat_columns([leaf, parts[1]])
+    out[:, :4].sum().backward()
+    assert out.requires_grad and torch.equal(leaf.grad, torch.ones(9, 4))

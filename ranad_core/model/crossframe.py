@@ -35,7 +35,7 @@ from torch import nn
 from ..rana import concat_frames
 from . import fused
 from .config import ModelConfig
-from .inputs import GUIDE_WIDTH, ModelInputs, guides
+from .inputs import GUIDE_WIDTH, ModelInputs, concat_columns, guides
 from .layers import Layout, MultiHeadRaNA
 from .matching import MatchKernel, consistent, pixel_pairs
 from .ranad import RaNAD, with_layer_gate
@@ -63,7 +63,7 @@ def temporal_layout(layouts: list) -> tuple[Layout, torch.Tensor, torch.Tensor]:
 def with_frame_id(inputs: ModelInputs, offset: int) -> torch.Tensor:
     onehot = inputs.features.new_zeros(inputs.features.shape[0], FRAME_FEATURES)
     onehot[:, offset + MAX_OFFSET] = 1
-    return torch.cat([inputs.features, onehot], 1)
+    return concat_columns([inputs.features, onehot])
 
 
 class TemporalMix(nn.Module):

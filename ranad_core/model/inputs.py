@@ -152,13 +152,15 @@ def contribution(alpha: np.ndarray, offsets: np.ndarray) -> np.ndarray:
     return (a * transmittance(a, offsets))[:, None].astype(np.float32)
 
 
-def _columns(parts: list) -> torch.Tensor:
-    """torch.cat of [N, c] and [N] float32 parts along the columns: by the C++ kernels' one pass over the rows where
-    they are built (torch's cat of 30 parts of 1-16 columns took 60-75 ms per 0.5 M rows), the same values."""
+def concat_columns(parts: list) -> torch.Tensor:
+    """torch.cat of [N, c] and [N] parts along the columns: float32 CPU tensors without gradients by the C++
+    kernels' one pass over the rows where they are built (torch's cat of 30 parts of 1-16 columns took 60-75 ms per
+    0.5 M rows), the same values; others (GPU, autograd) by torch.cat."""
     from ..rana.extension import cpu_extension_or_none
 
     parts = [p[:, None] if p.dim() == 1 else p for p in parts]
-    ext = cpu_extension_or_none() if all(p.dtype == torch.float32 for p in parts) else None
+    plain = all(p.dtype == torch.float32 and p.device.type == "cpu" and not p.requires_grad for p in parts)
+    ext = cpu_extension_or_none() if plain else None
     if ext is None:
         return torch.cat(parts, 1)
     return ext.rows_concat([p.contiguous() for p in parts])
@@ -172,8 +174,8 @@ def prepare(img: DeepImage, z_stats: tuple[float, float] | None = None, features
     whole frame, so that tiles and crops agree).
 
     The channels it reads are taken from the bins' rows in one gather (a take per channel group read every row
-    of the image once per group) and the blocks are concatenated once, in one pass (`_columns`; the radiance and
-    guide blocks were joined first, then joined again with the stacked encodings). Each value is computed as
+    of the image once per group) and the blocks are concatenated once, in one pass (`concat_columns`; the radiance
+    and guide blocks were joined first, then joined again with the stacked encodings). Each value is computed as
     before (log1p and log on fresh contiguous arrays), so the features are bitwise the same (tests/test_inputs.py
     keeps the earlier version as the oracle)."""
     if features not in FEATURE_SETS:
@@ -213,7 +215,7 @@ def prepare(img: DeepImage, z_stats: tuple[float, float] | None = None, features
     b = (torch.arange(layout.bins) - torch.repeat_interleave(offs[:-1], counts, output_size=layout.bins)).float()
     nb = torch.repeat_interleave(counts, counts, output_size=layout.bins).float()
     bins = [f(b * math.pi / 2 ** k) for k in range(BIN_FREQS) for f in (torch.sin, torch.cos)]
-    feats = _columns([*(torch.from_numpy(blk) for blk in blocks), *pos, *bins, b / nb.clamp(min=1)])
+    feats = concat_columns([*(torch.from_numpy(blk) for blk in blocks), *pos, *bins, b / nb.clamp(min=1)])
     mod = _modulation_of(col["albedo"]) if "albedo" in col and "specular" in col else None   # modulation(img)
     tensors = {k: torch.from_numpy(v) for k, v in layers.items()}
     return ModelInputs(layout, feats, tensors, None if mod is None else torch.from_numpy(mod), tensors["depth"])
