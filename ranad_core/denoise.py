@@ -30,7 +30,7 @@ from .binmerge import Groups
 from .channels import (ALPHA, DEPTH, DEPTH_BACK, DEPTHS, FLAT_NOISY, PRIOR, ChannelMap, canonical, detect,
                        layer_values, split_layer)
 from .deep import DeepImage, copy_values, replace_nonfinite, unsort
-from .model.inputs import depth_stats, prepare
+from .model.inputs import concat_columns, depth_stats, prepare
 from .profile import record_tile, stage
 
 ALIGN = 16                 # tile origins: multiples of the position encoding's longest period
@@ -262,9 +262,14 @@ class FramePrior:
         return cls(unsort(cols, fr.perm), fr.scale)
 
     def attached(self, img: DeepImage) -> DeepImage:
-        """`img` (the frame it was made from) with the prior's channels added."""
-        return img.with_values(np.concatenate([img.values, self.columns.astype(img.values.dtype)], 1),
-                               list(img.channels) + [*PRIOR, *FLAT_NOISY])
+        """`img` (the frame it was made from) with the prior's channels added (one pass over the rows for float32
+        values: numpy's concatenation of the two took 0.39 s of bench/shot.py's 5-frame 480x270 shot)."""
+        cols = self.columns.astype(img.values.dtype)
+        if img.values.dtype == np.float32:
+            values = concat_columns([torch.from_numpy(img.values), torch.from_numpy(cols)]).numpy()
+        else:
+            values = np.concatenate([img.values, cols], 1)
+        return img.with_values(values, list(img.channels) + [*PRIOR, *FLAT_NOISY])
 
 
 def _tile_inputs(fr: _Frame, win, width: int):
