@@ -137,6 +137,39 @@ def test_merge_keeps_the_composite_and_sharing_back_composites_to_any_result():
                                atol=1e-5)
 
 
+def test_merge_equals_the_groups_summed_bin_by_bin():
+    """merge against a plain loop over the bins: each group's float64 sum of its members' weighted values in bin
+    order from 0.0, as np.bincount adds them, rounded to float32; bit for bit, signed zeros and NaN included."""
+    srt, _ = sorted_canonical(thin(stack(), k=2))
+    values = srt.values.copy()
+    values[::11] = -0.0                       # a lone -0.0 sums to +0.0
+    values[5::97, srt.channels.index("diffuse.G")] = np.nan
+    values[::13, srt.channels.index("A")] = 1.5   # alpha clipped to 1 before compositing
+    srt = srt.with_values(values)
+    g = binmerge.find_groups(srt)
+    assert g is not None and 0 < g.merged < srt.num_bins
+    weight = {"composite": g.trans, "sum": np.ones(srt.num_bins), "mean": g.share}
+    expect = np.zeros((g.merged, len(srt.channels)), np.float64)
+    first = np.full(g.merged, -1)
+    for i, grp in enumerate(g.index):
+        first[grp] = i if first[grp] < 0 else first[grp]
+        for j, c in enumerate(srt.channels):
+            v = float(values[i, j])
+            if c == "A":
+                expect[grp, j] += min(max(v, 0.0), 1.0) * g.trans[i]
+            elif c == "Z":
+                expect[grp, j] = values[first[grp], j]
+            elif c == "ZBack":
+                expect[grp, j] = v                                        # the last member's
+            else:
+                how = ("composite" if c in binmerge.PREMULTIPLIED else "sum" if c in binmerge.SUMMED else "mean")
+                expect[grp, j] += v * weight[how][i]
+    merged = binmerge.merge(srt, g)
+    assert merged.values.dtype == np.float32 and merged.values.flags.c_contiguous
+    assert merged.values.tobytes() == expect.astype(np.float32).tobytes()
+    assert list(merged.offsets) == list(g.offsets) and merged.channels == srt.channels
+
+
 def test_thin_bins_denoise_like_whole_surface_bins():
     """The shipped default on a frame and on the same frame binned thinly: the same flattened image, the thin
     input's bins kept; without merging the thin frame denoises differently (what the merge is for)."""
