@@ -369,3 +369,38 @@ torch::Tensor rows_concat(std::vector<torch::Tensor> parts) {
   });
   return out;
 }
+
+torch::Tensor rows_pair_features(torch::Tensor a, torch::Tensor b, torch::Tensor qi, torch::Tensor kj) {
+  check_rows(a, "rows_pair_features a");
+  check_rows(b, "rows_pair_features b");
+  const int64_t d = a.size(1), na = a.size(0), nb = b.size(0);
+  TORCH_CHECK(b.size(1) == d, "rows_pair_features: rows of ", d, " and ", b.size(1), " columns");
+  for (const auto* t : {&qi, &kj})
+    TORCH_CHECK(t->device().is_cpu() && t->scalar_type() == torch::kLong && t->dim() == 1 && t->is_contiguous(),
+                "rows_pair_features: contiguous int64 pair indices expected");
+  const int64_t n = qi.size(0);
+  TORCH_CHECK(kj.size(0) == n, "rows_pair_features: ", n, " and ", kj.size(0), " pair indices");
+  const int64_t* ip = qi.data_ptr<int64_t>();
+  const int64_t* jp = kj.data_ptr<int64_t>();
+  // indices checked before anything is read: a bad pair is an error, not a read out of bounds
+  int64_t bad = 0;
+#pragma omp parallel for reduction(+ : bad) num_threads(threads())
+  for (int64_t p = 0; p < n; ++p) bad += (ip[p] < 0) | (ip[p] >= na) | (jp[p] < 0) | (jp[p] >= nb);
+  TORCH_CHECK(bad == 0, "rows_pair_features: ", bad, " pair indices out of range");
+  auto out = torch::empty({n, 2 * d}, a.options());
+  const float* ap = a.data_ptr<float>();
+  const float* bp = b.data_ptr<float>();
+  float* op = out.data_ptr<float>();
+  over_tiles(n, [&](int64_t p0, int64_t rows) {
+    for (int64_t p = p0; p < p0 + rows; ++p) {
+      const float* x = ap + ip[p] * d;
+      const float* y = bp + jp[p] * d;
+      float* o = op + p * 2 * d;
+      for (int64_t j = 0; j < d; ++j) {
+        o[j] = std::fabs(x[j] - y[j]);
+        o[d + j] = x[j] * y[j];
+      }
+    }
+  });
+  return out;
+}

@@ -36,3 +36,9 @@ torch::Tensor rows_scale_mix(torch::Tensor feat, torch::Tensor wt, torch::Tensor
 // torch.cat(parts, 1) for contiguous float32 [N, c_k] parts: one pass over the rows, a tile of rows at a time (torch's
 // cat of many narrow parts, e.g. a bin's 45 input features from blocks of 1-16 columns, wrote 95 MB in 60 ms).
 torch::Tensor rows_concat(std::vector<torch::Tensor> parts);
+
+// [|a[qi] - b[kj]|, a[qi] * b[kj]] for every pair p of row indices (qi[p], kj[p]): the matching step's pair features
+// (model/matching.py) in one pass, without the gathered rows and the difference, its absolute value and the product as
+// four tensors of their own (torch's six passes over them took 86 ms for 0.63 M pairs of 16 columns, mostly page
+// faults of the fresh memory).
+torch::Tensor rows_pair_features(torch::Tensor a, torch::Tensor b, torch::Tensor qi, torch::Tensor kj);

@@ -20,7 +20,9 @@ from ranad_core.model.config import ModelConfig
 from ranad_core.model.crossframe import CrossFrameRaNAD
 from ranad_core.model.inputs import GUIDE_COLUMNS, GUIDE_LAYOUT, GUIDE_WIDTH, guides
 from ranad_core.model.layers import Layout
-from ranad_core.model.matching import GUARD, MatchKernel, consistent, pixel_pairs, segment_softmax
+from ranad_core.model.crossframe import temporal_layout
+from ranad_core.model.matching import GUARD, MatchKernel, consistent, pair_features, pixel_pairs, segment_softmax
+from ranad_core.rana.extension import cpu_extension_or_none
 from ranad_core.motion import compensate
 
 SHOT = Path(__file__).resolve().parents[1] / "examples" / "synth_shot"
@@ -49,6 +51,29 @@ def test_segment_softmax_sums_to_one_per_segment():
     torch.testing.assert_close(sums[[0, 2, 3]], torch.ones(3))
     torch.testing.assert_close(w[:3], torch.softmax(logits[:3], 0))
     assert torch.isfinite(w).all()
+
+
+def test_pair_features_are_the_gathered_difference_and_product_bit_for_bit(monkeypatch):
+    """The C++ pass against torch's gathers, |a - b| and a * b (an oracle of exact IEEE operations), signed zeros,
+    infinities and NaN included; without the kernels pair_features is that torch expression itself."""
+    g = torch.Generator().manual_seed(0)
+    a, b = torch.randn(50, 16, generator=g), torch.randn(70, 16, generator=g)
+    a[3, :4] = torch.tensor([-0.0, float("inf"), float("nan"), 1e-40])
+    b[5, :4] = torch.tensor([0.0, float("inf"), -2.0, -1e-40])
+    qi = torch.randint(0, 50, (3000,), generator=g).sort().values
+    kj = torch.randint(0, 70, (3000,), generator=g)
+    qi[:2], kj[:2] = 3, 5
+    x, y = a[qi], b[kj]
+    want = torch.cat([(x - y).abs(), x * y], 1)
+    if cpu_extension_or_none() is None:
+        pytest.skip("the C++ kernels are not built here")
+    got = pair_features(a, b, qi, kj)
+    assert got.shape == (3000, 32) and got.view(torch.int32).equal(want.view(torch.int32))
+    with pytest.raises(RuntimeError, match="out of range"):
+        pair_features(a, b, qi, kj + 70)
+    import ranad_core.rana.extension as extension
+    monkeypatch.setattr(extension, "cpu_extension_or_none", lambda: None)
+    assert pair_features(a, b, qi, kj).view(torch.int32).equal(want.view(torch.int32))
 
 
 def test_match_kernel_is_linear_in_values_and_local_to_the_pixel():
@@ -130,6 +155,32 @@ def guarded_window():
     frames = [read_deep(SHOT / f"noisy_spp16.{i:04d}.exr").crop((0, 0, 23, 23)) for i in range(3)]
     window = [prepare(f.sorted()[0]) for f in compensate(frames, 1)[0]]
     return single, model, window
+
+
+def test_the_guard_keeps_the_pairs_of_the_plain_rule():
+    """_match_args compares guides on the neighbours' pairs only: the pairs it keeps are those of the rule written
+    plainly over every pair of a pixel (the bin itself, or a neighbour's bin whose guides agree), on a window whose
+    neighbours differ from the centre in albedo in some pixels and not in others."""
+    _, model, window = guarded_window()
+    centre = window[1]
+    other = copy.copy(centre)
+    other.features = centre.features.clone()
+    other.features[::3, GUIDE_COLUMNS["albedo"]] += 0.5
+    w = [other, centre, window[2]]
+    with torch.no_grad():
+        feats = model.embeddings(w, 1)
+        keys, gather, frame = temporal_layout([f.layout for f in w])
+        got = model._match_args(feats, w, 1, keys, gather, frame)
+        rows = torch.empty_like(gather)
+        rows[gather] = torch.arange(gather.numel())
+        own = rows[other.layout.bins:other.layout.bins + centre.layout.bins]
+        qi, kj = pixel_pairs(centre.layout.pixels, keys)
+        allg = torch.cat([f[:, -GUIDE_WIDTH:] for f in feats])[gather]
+        ok = (kj == own[qi]) | ((frame[kj] != 1) & consistent(allg[own][qi], allg[kj]))
+    assert torch.equal(got["own"], own)
+    assert torch.equal(got["pairs"][0], qi[ok]) and torch.equal(got["pairs"][1], kj[ok])
+    neighbours = frame[kj[ok]] != 1
+    assert 0 < int(neighbours.sum()) < int((frame[kj] != 1).sum())   # some neighbours' bins kept, some left out
 
 
 def test_the_guard_keeps_out_neighbours_that_show_something_else():

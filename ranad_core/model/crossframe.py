@@ -191,10 +191,14 @@ class CrossFrameRaNAD(nn.Module):
         pairs = pixel_pairs(c.layout.pixels, keys)
         out = {"own": own_rows, "pairs": pairs, "feats": feats}
         if self.config.temporal_guard:
-            allg = torch.cat([f[:, -GUIDE_WIDTH:] for f in feats])[gather]
+            frame_guides = torch.cat([f[:, -GUIDE_WIDTH:] for f in feats])   # key row r's are row gather[r]'s
             out["feats"] = [f[:, :-GUIDE_WIDTH] for f in feats]
             qi, kj = pairs
-            ok = (kj == own_rows[qi]) | ((frame[kj] != centre) & consistent(allg[own_rows][qi], allg[kj]))
+            ok = kj == own_rows[qi]
+            # the guides compared only on the neighbours' pairs, about half of a pixel's pairs (centre bin i's own
+            # key row holds row first + i of the frames' guides)
+            other = torch.nonzero(frame[kj] != centre).squeeze(1)
+            ok[other] |= consistent(frame_guides[qi[other] + first], frame_guides[gather[kj[other]]])
             out["pairs"] = (qi[ok], kj[ok])
         return out
 
