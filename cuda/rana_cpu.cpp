@@ -233,5 +233,6 @@ PYBIND11_MODULE(TORCH_EXTENSION_NAME, m) {
   m.def("rows_scale_mix", &rows_scale_mix, "a reconstruction's scale mixer: linear, softmax, mix (inference)");
   m.def("rows_concat", &rows_concat, "torch.cat(parts, 1) of contiguous float32 rows in one pass");
   m.def("rows_pair_features", &rows_pair_features, "the matching step's pair features [|a - b|, a * b] (inference)");
+  m.def("rows_pair_sum", &rows_pair_sum, "the matching step's weighted sum over each query's pairs (inference)");
   m.def("composite_blocks", &composite_blocks, "front-to-back over composite of sorted bins per pixel (inference)");
 }

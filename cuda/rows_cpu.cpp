@@ -404,3 +404,43 @@ torch::Tensor rows_pair_features(torch::Tensor a, torch::Tensor b, torch::Tensor
   });
   return out;
 }
+
+torch::Tensor rows_pair_sum(torch::Tensor w, torch::Tensor v, torch::Tensor qi, torch::Tensor kj, int64_t queries) {
+  check_rows(v, "rows_pair_sum values");
+  const int64_t c = v.size(1), nk = v.size(0), n = qi.size(0);
+  TORCH_CHECK(w.device().is_cpu() && w.scalar_type() == torch::kFloat && w.dim() == 1 && w.is_contiguous() &&
+                  w.size(0) == n,
+              "rows_pair_sum: contiguous float32 weights, one per pair, expected");
+  for (const auto* t : {&qi, &kj})
+    TORCH_CHECK(t->device().is_cpu() && t->scalar_type() == torch::kLong && t->dim() == 1 && t->is_contiguous(),
+                "rows_pair_sum: contiguous int64 pair indices expected");
+  TORCH_CHECK(kj.size(0) == n, "rows_pair_sum: ", n, " and ", kj.size(0), " pair indices");
+  TORCH_CHECK(queries >= 0, "rows_pair_sum: a negative number of queries");
+  const float* wp = w.data_ptr<float>();
+  const float* vp = v.data_ptr<float>();
+  const int64_t* ip = qi.data_ptr<int64_t>();
+  const int64_t* jp = kj.data_ptr<int64_t>();
+  int64_t bad = 0;
+#pragma omp parallel for reduction(+ : bad) num_threads(threads())
+  for (int64_t p = 0; p < n; ++p)
+    bad += (ip[p] < 0) | (ip[p] >= queries) | (jp[p] < 0) | (jp[p] >= nk) | (p > 0 && ip[p] < ip[p - 1]);
+  TORCH_CHECK(bad == 0, "rows_pair_sum: ", bad, " pair indices out of range or queries out of order");
+  auto out = torch::zeros({queries, c}, v.options());
+  float* op = out.data_ptr<float>();
+  // each thread a run of queries: its pairs are one run too (qi ascending)
+  over_tiles(queries, [&](int64_t q0, int64_t rows) {
+    int64_t p = std::lower_bound(ip, ip + n, q0) - ip;
+    const int64_t end = std::lower_bound(ip, ip + n, q0 + rows) - ip;
+    for (; p < end; ++p) {
+      const float* x = vp + jp[p] * c;
+      float* o = op + ip[p] * c;
+      for (int64_t j = 0; j < c; ++j) {
+        // the product rounded on its own, as torch's w * v before its index_add: through a volatile, which the
+        // compiler may not fuse with the addition into one multiply-add (GCC fuses across statements otherwise)
+        volatile float t = wp[p] * x[j];
+        o[j] = o[j] + t;
+      }
+    }
+  });
+  return out;
+}

@@ -42,3 +42,8 @@ torch::Tensor rows_concat(std::vector<torch::Tensor> parts);
 // four tensors of their own (torch's six passes over them took 86 ms for 0.63 M pairs of 16 columns, mostly page
 // faults of the fresh memory).
 torch::Tensor rows_pair_features(torch::Tensor a, torch::Tensor b, torch::Tensor qi, torch::Tensor kj);
+
+// out[q] = sum of w[p] * v[kj[p]] over the pairs p of query q (qi ascending), each product rounded and added in pair
+// order from 0: torch's zeros(queries, C).index_add(0, qi, w[:, None] * v[kj]) bit for bit, in one pass without the
+// gathered values and products (the matching step's weighted sum, model/matching.py).
+torch::Tensor rows_pair_sum(torch::Tensor w, torch::Tensor v, torch::Tensor qi, torch::Tensor kj, int64_t queries);

@@ -21,7 +21,8 @@ from ranad_core.model.crossframe import CrossFrameRaNAD
 from ranad_core.model.inputs import GUIDE_COLUMNS, GUIDE_LAYOUT, GUIDE_WIDTH, guides
 from ranad_core.model.layers import Layout
 from ranad_core.model.crossframe import temporal_layout
-from ranad_core.model.matching import GUARD, MatchKernel, consistent, pair_features, pixel_pairs, segment_softmax
+from ranad_core.model.matching import (GUARD, MatchKernel, consistent, pair_features, pair_sum, pixel_pairs,
+                                      segment_softmax)
 from ranad_core.rana.extension import cpu_extension_or_none
 from ranad_core.motion import compensate
 
@@ -74,6 +75,31 @@ def test_pair_features_are_the_gathered_difference_and_product_bit_for_bit(monke
     import ranad_core.rana.extension as extension
     monkeypatch.setattr(extension, "cpu_extension_or_none", lambda: None)
     assert pair_features(a, b, qi, kj).view(torch.int32).equal(want.view(torch.int32))
+
+
+def test_pair_sum_is_torchs_index_add_of_the_weighted_values_bit_for_bit(monkeypatch):
+    """The C++ weighted sum against torch's zeros.index_add(0, qi, w[:, None] * v[kj]) (what the matching step did
+    before it): long runs of pairs, where a fused multiply-add or another order of the additions would show, queries
+    without pairs (zeros) and one of -0.0 products; bad pairs are refused."""
+    g = torch.Generator().manual_seed(1)
+    v = torch.randn(90, 6, generator=g) * torch.logspace(-3, 3, 6)
+    qi = torch.randint(0, 40, (4000,), generator=g).sort().values
+    qi = qi[qi != 7]                                      # query 7 has no pairs
+    kj = torch.randint(0, 90, (qi.numel(),), generator=g)
+    w = torch.rand(qi.numel(), generator=g)
+    w[qi == 9] = -0.0
+    want = v.new_zeros(40, 6).index_add(0, qi, w.unsqueeze(1) * v[kj])
+    if cpu_extension_or_none() is None:
+        pytest.skip("the C++ kernels are not built here")
+    got = pair_sum(w, v, qi, kj, 40)
+    assert got.view(torch.int32).equal(want.view(torch.int32)) and (got[7] == 0).all()
+    with pytest.raises(RuntimeError, match="out of range or queries out of order"):
+        pair_sum(w, v, qi.flip(0), kj, 40)
+    with pytest.raises(RuntimeError, match="out of range"):
+        pair_sum(w, v, qi, kj, 30)
+    import ranad_core.rana.extension as extension
+    monkeypatch.setattr(extension, "cpu_extension_or_none", lambda: None)
+    assert pair_sum(w, v, qi, kj, 40).view(torch.int32).equal(want.view(torch.int32))
 
 
 def test_match_kernel_is_linear_in_values_and_local_to_the_pixel():
