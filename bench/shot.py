@@ -9,7 +9,7 @@ whole runs, so the per-shot overheads count too. With --repeat N the models run 
 cross, ..., single, cross, ...) and each model's median is used: one run each was at the mercy of the order
 (the first run of a process tree pays for cold caches; this machine's runs vary by 20%).
 
-Usage: python bench/shot.py [--size 960x540] [--threads 2] [--single cpu-small-pd-v2] [--cross cpu-small-pd-xg-v2]
+Usage: python bench/shot.py [--size 960x540] [--threads 2] [--single MODEL] [--cross MODEL]
            [--cross ANOTHER ...] [--repeat 3] [--args "--profile"]
 """
 
@@ -28,6 +28,7 @@ sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from denoise import DENOISE, run_measured, tile_to  # noqa: E402
 
 from ranad_core.exr import read_deep, write_deep  # noqa: E402
+from ranad_core.model.store import DEFAULT_CROSS_MODEL, DEFAULT_MODEL  # noqa: E402
 
 SHOT = os.path.join(ROOT, "examples", "synth_shot", "noisy_spp16.{:04d}.exr")
 ORDER = (0, 1, 2, 1, 0)
@@ -43,13 +44,13 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--size", default="960x540")
     ap.add_argument("--threads", type=int, default=2)
-    ap.add_argument("--single", default="cpu-small-pd-v2")
-    ap.add_argument("--cross", action="append", default=[])
+    ap.add_argument("--single", default=DEFAULT_MODEL, help="default: the shipped single-frame default")
+    ap.add_argument("--cross", action="append", default=[], help="default: the shipped cross-frame default")
     ap.add_argument("--repeat", type=int, default=3, help="interleaved rounds; each model's median counts")
     ap.add_argument("--args", default="", help="options added to every ranad denoise run (e.g. --profile)")
     a = ap.parse_args()
     width, height = (int(v) for v in a.size.lower().split("x"))
-    crosses = a.cross or ["cpu-small-pd-xg-v2"]
+    crosses = a.cross or [DEFAULT_CROSS_MODEL]
     with tempfile.TemporaryDirectory() as folder:
         t = time.perf_counter()
         pattern = make_shot(folder, width, height)
