@@ -230,7 +230,7 @@ def _model_frame(img: DeepImage, mapping: ChannelMap, features: str = "log1p", p
         residual = np.nan_to_num(residual, nan=0.0, posinf=0.0, neginf=0.0)
     with stage("inputs/sort and prior"):
         srt, perm = canon.sorted(copy=False)   # canon is this function's own
-        res = residual[perm] if residual is not None else None
+        res = np.take(residual, perm, axis=0) if residual is not None else None
         groups = binmerge.groups_of(srt, img, perm, merge_gap)
         if groups is not None:
             srt = binmerge.merge(srt, groups)
@@ -271,11 +271,13 @@ class FramePrior:
 
 def _tile_inputs(fr: _Frame, win, width: int):
     idx, local = window_bins(fr.srt.offsets, width, win)
-    sub = DeepImage(values=fr.srt.values[idx], offsets=local, channels=fr.srt.channels,
+    # np.take: numpy's row gather, half the time of fancy indexing's
+    sub = DeepImage(values=np.take(fr.srt.values, idx, axis=0), offsets=local, channels=fr.srt.channels,
                     data_window=(0, 0, win[2] - win[0], win[3] - win[1]))
     inputs = prepare(sub, fr.stats, fr.features, fr.scale)
     if fr.residual is not None:
-        inputs.layers["diffuse"] = torch.cat([inputs.layers["diffuse"], torch.from_numpy(fr.residual[idx])], 1)
+        inputs.layers["diffuse"] = torch.cat([inputs.layers["diffuse"],
+                                              torch.from_numpy(np.take(fr.residual, idx, axis=0))], 1)
     return inputs, idx, local
 
 
