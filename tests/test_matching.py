@@ -24,6 +24,7 @@ from ranad_core.model.crossframe import temporal_layout
 from ranad_core.model.matching import (GUARD, MatchKernel, consistent, pair_features, pair_sum, pixel_pairs,
                                       segment_softmax)
 from ranad_core.rana.extension import cpu_extension_or_none
+from ranad_core.rana.reference import neighbour_pairs
 from ranad_core.motion import compensate
 
 SHOT = Path(__file__).resolve().parents[1] / "examples" / "synth_shot"
@@ -42,6 +43,10 @@ def test_pairs_are_the_bins_of_the_query_pixel():
     kp = keys.pixels.tolist()
     want = sorted((q, k) for q, qp in enumerate(queries.pixels.tolist()) for k in range(keys.bins) if kp[k] == qp)
     assert got == want and len(want) > 0
+    # the same pairs, in the same order, as the reference RaNA's for a disc of radius 0, queries off the grid too
+    off = torch.cat([queries.pixels, torch.tensor([[-1, 2], [5, 0], [0, 7], [4, -3]])])
+    ref = neighbour_pairs(off, keys.offsets, keys.size, 0.0)[:2]
+    assert all(torch.equal(a, b) for a, b in zip(pixel_pairs(off, keys), ref))
 
 
 def test_segment_softmax_sums_to_one_per_segment():

@@ -20,7 +20,6 @@ from __future__ import annotations
 import torch
 from torch import nn
 
-from ..rana.reference import neighbour_pairs
 from . import fused
 from .inputs import GUIDE_LAYOUT
 from .layers import Layout
@@ -33,7 +32,16 @@ SELF_BONUS = 3.0  # initial logit bonus of the query's own bin: the step starts 
 def pixel_pairs(q_pixels: torch.Tensor, keys: Layout) -> tuple[torch.Tensor, torch.Tensor]:
     """Every (query row, key row) pair that shares a pixel: q_pixels [Nq, 2] (y, x) -> (qi [P], kj [P]), grouped
     by query in ascending order (the reference RaNA's pairs for a disc of radius 0)."""
-    qi, kj, _, _ = neighbour_pairs(q_pixels, keys.offsets, keys.size, 0.0)
+    hk, wk = keys.size
+    y, x = q_pixels[:, 0], q_pixels[:, 1]
+    inside = (y >= 0) & (y < hk) & (x >= 0) & (x < wk)
+    p = torch.where(inside, y * wk + x, torch.zeros_like(y))
+    start = keys.offsets[p]
+    count = torch.where(inside, keys.offsets[p + 1] - start, torch.zeros_like(start))
+    total = int(count.sum())
+    # neighbour_pairs for a disc of one pixel, without its disc offsets (72 -> 31 ms for a 960x540 tile's queries)
+    qi = torch.repeat_interleave(torch.arange(count.numel(), device=count.device), count, output_size=total)
+    kj = start[qi] + torch.arange(total, device=count.device) - (torch.cumsum(count, 0) - count)[qi]
     return qi, kj
 
 
