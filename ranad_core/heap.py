@@ -15,8 +15,11 @@ heap keeps for later. Kept memory also counts against the ceiling itself: on the
 `--max-memory 4G` the resident set only grew, to 3.6 GB after the flat prior (OIDN's freed scratch kept) and 4.1 GB
 after the output was assembled, 2% under the ceiling. So a denoise sets the ceiling (`set_ceiling`) and calls
 `relieve` between its stages and tiles: above RELIEVE_AT of the ceiling the kept memory goes back, below it
-(the default 8G on that frame) nothing is given back and nothing is faulted in again. Elsewhere than glibc (musl,
-macOS) all of this is a no-op.
+(the default 8G on that frame) nothing is given back and nothing is faulted in again. RELIEVE_AT was 0.8 until a
+3-frame shot of that frame at `--max-memory 4G` peaked at 3.25-4.08 GiB over seven runs, over the ceiling in four
+(the tiles' resident set sat at 3.14-3.16 GiB, just under 0.8 of it, so nothing went back between tiles and the
+kept memory grew where a tile's allocations fell differently); at 0.7 three runs peaked at 3.24-3.28 GiB, in
+the same time (runs/generalization-s38). Elsewhere than glibc (musl, macOS) all of this is a no-op.
 """
 
 from __future__ import annotations
@@ -29,7 +32,7 @@ _M_TRIM_THRESHOLD, _M_TOP_PAD, _M_MMAP_MAX = -1, -2, -4   # <malloc.h>
 _TOP_PAD = 64 << 20            # heap growth per sbrk: fewer system calls as a tile's tensors grow the heap
 _NEVER_TRIM = (1 << 31) - 1    # mallopt takes an int: 2 GiB of free heap top before free() trims on its own
 
-RELIEVE_AT = 0.8               # of the ceiling: the resident set above which relieve() gives kept memory back
+RELIEVE_AT = 0.7               # of the ceiling: the resident set above which relieve() gives kept memory back
 
 _state = {"libc": None, "ceiling": None}   # libc: glibc's handle once the policy is in effect
 
