@@ -308,3 +308,19 @@ def test_float_object_ids_keep_objects_apart():
     assert binmerge.groups_of(srt, img, perm) is None                # the objects keep apart
     plain = img.select(["R", "G", "B", "A", "Z"])
     assert binmerge.groups_of(srt, plain, perm).merged == n_pix      # without the ids they would merge
+
+
+def test_describing_a_file_with_thin_bins_does_not_load_torch(tmp_path):
+    """`ranad info`'s reading path (exr.inspect.describe, which counts thin bins with find_groups) stays free of
+    torch, whose import costs seconds of CPU: the fuzz harness times each case's describe against a 5 s limit, and
+    a torch import at binmerge's top once pushed its first case over it."""
+    import subprocess
+    import sys
+
+    path = tmp_path / "thin.exr"
+    write_deep(str(path), thin(stack()))
+    code = ("import sys; from ranad_core.exr.inspect import describe; d = describe(sys.argv[1]); "
+            "print('torch' in sys.modules)")
+    out = subprocess.run([sys.executable, "-c", code, str(path)], capture_output=True, text=True, cwd=ROOT)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.strip() == "False"
