@@ -370,16 +370,26 @@ torch::Tensor rows_concat(std::vector<torch::Tensor> parts) {
   return out;
 }
 
+namespace {
+
+// The (qi, kj) pair indices of rows_pair_features and rows_pair_sum: contiguous int64 CPU vectors of one length,
+// which is returned (their ranges are each kernel's own check).
+int64_t check_pairs(const torch::Tensor& qi, const torch::Tensor& kj, const char* what) {
+  for (const auto* t : {&qi, &kj})
+    TORCH_CHECK(t->device().is_cpu() && t->scalar_type() == torch::kLong && t->dim() == 1 && t->is_contiguous(),
+                what, ": contiguous int64 pair indices expected");
+  TORCH_CHECK(kj.size(0) == qi.size(0), what, ": ", qi.size(0), " and ", kj.size(0), " pair indices");
+  return qi.size(0);
+}
+
+}  // namespace
+
 torch::Tensor rows_pair_features(torch::Tensor a, torch::Tensor b, torch::Tensor qi, torch::Tensor kj) {
   check_rows(a, "rows_pair_features a");
   check_rows(b, "rows_pair_features b");
   const int64_t d = a.size(1), na = a.size(0), nb = b.size(0);
   TORCH_CHECK(b.size(1) == d, "rows_pair_features: rows of ", d, " and ", b.size(1), " columns");
-  for (const auto* t : {&qi, &kj})
-    TORCH_CHECK(t->device().is_cpu() && t->scalar_type() == torch::kLong && t->dim() == 1 && t->is_contiguous(),
-                "rows_pair_features: contiguous int64 pair indices expected");
-  const int64_t n = qi.size(0);
-  TORCH_CHECK(kj.size(0) == n, "rows_pair_features: ", n, " and ", kj.size(0), " pair indices");
+  const int64_t n = check_pairs(qi, kj, "rows_pair_features");
   const int64_t* ip = qi.data_ptr<int64_t>();
   const int64_t* jp = kj.data_ptr<int64_t>();
   // indices checked before anything is read: a bad pair is an error, not a read out of bounds
@@ -407,14 +417,10 @@ torch::Tensor rows_pair_features(torch::Tensor a, torch::Tensor b, torch::Tensor
 
 torch::Tensor rows_pair_sum(torch::Tensor w, torch::Tensor v, torch::Tensor qi, torch::Tensor kj, int64_t queries) {
   check_rows(v, "rows_pair_sum values");
-  const int64_t c = v.size(1), nk = v.size(0), n = qi.size(0);
+  const int64_t c = v.size(1), nk = v.size(0), n = check_pairs(qi, kj, "rows_pair_sum");
   TORCH_CHECK(w.device().is_cpu() && w.scalar_type() == torch::kFloat && w.dim() == 1 && w.is_contiguous() &&
                   w.size(0) == n,
               "rows_pair_sum: contiguous float32 weights, one per pair, expected");
-  for (const auto* t : {&qi, &kj})
-    TORCH_CHECK(t->device().is_cpu() && t->scalar_type() == torch::kLong && t->dim() == 1 && t->is_contiguous(),
-                "rows_pair_sum: contiguous int64 pair indices expected");
-  TORCH_CHECK(kj.size(0) == n, "rows_pair_sum: ", n, " and ", kj.size(0), " pair indices");
   TORCH_CHECK(queries >= 0, "rows_pair_sum: a negative number of queries");
   const float* wp = w.data_ptr<float>();
   const float* vp = v.data_ptr<float>();

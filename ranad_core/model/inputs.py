@@ -152,15 +152,23 @@ def contribution(alpha: np.ndarray, offsets: np.ndarray) -> np.ndarray:
     return (a * transmittance(a, offsets))[:, None].astype(np.float32)
 
 
+def exact_row_kernels(floats, indices=()):
+    """The C++ kernels for the passes that give torch's values bit for bit (concat_columns, matching.pair_features,
+    matching.pair_sum), where they are built and every tensor is on the CPU, the floats float32 without gradients
+    (inference) and the indices int64; None otherwise (torch does the work)."""
+    from ..rana.extension import cpu_extension_or_none
+
+    plain = (all(t.dtype == torch.float32 and t.device.type == "cpu" and not t.requires_grad for t in floats)
+             and all(t.dtype == torch.int64 and t.device.type == "cpu" for t in indices))
+    return cpu_extension_or_none() if plain else None
+
+
 def concat_columns(parts: list) -> torch.Tensor:
     """torch.cat of [N, c] and [N] parts along the columns: float32 CPU tensors without gradients by the C++
     kernels' one pass over the rows where they are built (torch's cat of 30 parts of 1-16 columns took 60-75 ms per
     0.5 M rows), the same values; others (GPU, autograd) by torch.cat."""
-    from ..rana.extension import cpu_extension_or_none
-
     parts = [p[:, None] if p.dim() == 1 else p for p in parts]
-    plain = all(p.dtype == torch.float32 and p.device.type == "cpu" and not p.requires_grad for p in parts)
-    ext = cpu_extension_or_none() if plain else None
+    ext = exact_row_kernels(parts)
     if ext is None:
         return torch.cat(parts, 1)
     return ext.rows_concat([p.contiguous() for p in parts])

@@ -21,7 +21,7 @@ import torch
 from torch import nn
 
 from . import fused
-from .inputs import GUIDE_LAYOUT
+from .inputs import GUIDE_LAYOUT, exact_row_kernels
 from .layers import Layout
 
 PAIR_DIM = 16    # width of each bin's projection the pair scores compare
@@ -45,22 +45,12 @@ def pixel_pairs(q_pixels: torch.Tensor, keys: Layout) -> tuple[torch.Tensor, tor
     return qi, kj
 
 
-def _pair_kernels(floats, indices):
-    """The C++ kernels for pair_features and pair_sum: where they are built and every tensor is on the CPU, the
-    floats float32 without gradients (inference) and the indices int64; None otherwise (torch does the work)."""
-    from ..rana.extension import cpu_extension_or_none
-
-    plain = (all(t.dtype == torch.float32 and t.device.type == "cpu" and not t.requires_grad for t in floats)
-             and all(t.dtype == torch.int64 and t.device.type == "cpu" for t in indices))
-    return cpu_extension_or_none() if plain else None
-
-
 def pair_features(a: torch.Tensor, b: torch.Tensor, qi: torch.Tensor, kj: torch.Tensor) -> torch.Tensor:
     """[P, 2 d] the pair scores' input: [|a[qi] - b[kj]|, a[qi] * b[kj]] for rows a [Nq, d] and b [Nk, d]. Float32
     CPU tensors without gradients by the C++ kernels' one pass over the pairs where they are built (torch's gathers,
     difference, absolute value, product and concatenation took 86 ms per layer of a 960x540 tile's 0.63 M pairs),
     the same values; others (GPU, autograd) by torch."""
-    ext = _pair_kernels((a, b), (qi, kj))
+    ext = exact_row_kernels((a, b), (qi, kj))
     if ext is None:
         x, y = a[qi], b[kj]
         return torch.cat([(x - y).abs(), x * y], 1)
@@ -72,7 +62,7 @@ def pair_sum(w: torch.Tensor, values: torch.Tensor, qi: torch.Tensor, kj: torch.
     zeros.index_add(0, qi, w[:, None] * values[kj]); by the C++ kernels' one pass where they are built and nothing
     wants gradients (torch's gather, product and index_add took 22 ms per layer of a 960x540 tile), the same
     values."""
-    ext = _pair_kernels((w, values), (qi, kj))
+    ext = exact_row_kernels((w, values), (qi, kj))
     if ext is None:
         return values.new_zeros(queries, values.shape[1]).index_add(0, qi, w.unsqueeze(1).to(values.dtype) * values[kj])
     return ext.rows_pair_sum(w.contiguous(), values.contiguous(), qi.contiguous(), kj.contiguous(), queries)
