@@ -143,6 +143,16 @@ def _window_bins(integral: np.ndarray, width: int, height: int, tile: int, halo:
             + integral[np.ix_(y0, x0)])
 
 
+def _work(bins: np.ndarray) -> int:
+    return int(bins.sum()) + TILE_OVERHEAD_BINS * bins.size
+
+
+def tiling_work(offsets: np.ndarray, width: int, height: int, tile: int, halo: int) -> int:
+    """choose_tile's measure of a tiling's work: the bins its haloed windows compute plus TILE_OVERHEAD_BINS per
+    tile."""
+    return _work(_window_bins(_bins_integral(offsets, width, height), width, height, tile, halo))
+
+
 def _worst_window(integral: np.ndarray, width: int, height: int, tile: int, halo: int) -> int:
     return int(_window_bins(integral, width, height, tile, halo).max())
 
@@ -190,7 +200,7 @@ def choose_tile(offsets: np.ndarray, width: int, height: int, halo: int, budget_
         bins = _window_bins(integral, width, height, tile, halo)
         if bins.max() > limit:
             continue
-        cost = int(bins.sum()) + TILE_OVERHEAD_BINS * bins.size
+        cost = _work(bins)
         if best is None or cost < best[0]:
             best = (cost, tile)
     return ALIGN if best is None else best[1]

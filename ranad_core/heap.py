@@ -68,6 +68,23 @@ def give_back() -> None:
         _state["libc"].malloc_trim(0)
 
 
+class _Mallinfo2(ctypes.Structure):   # <malloc.h>, glibc 2.33 and later
+    _fields_ = [(name, ctypes.c_size_t) for name in ("arena", "ordblks", "smblks", "hblks", "hblkhd", "usmblks",
+                                                     "fsmblks", "uordblks", "fordblks", "keepcost")]
+
+
+def kept_bytes() -> int | None:
+    """Free bytes the heap keeps for reuse, every arena (mallinfo2's fordblks; an upper bound of what give_back
+    would return, as some of them may not be resident); None where unknown (the policy not in effect, or a glibc
+    without mallinfo2)."""
+    libc = _state["libc"]
+    if libc is None or not hasattr(libc, "mallinfo2"):
+        return None
+    info = libc.mallinfo2
+    info.restype, info.argtypes = _Mallinfo2, []
+    return int(info().fordblks)
+
+
 def resident_now() -> int:
     """The resident set now, kept memory included (Linux /proc; 0 where it cannot be read)."""
     try:

@@ -24,12 +24,24 @@ from .errors import RanadError
 KERNEL_CACHE_ENV = "RANAD_RANA_BUFFER_CACHE_MB"
 KERNEL_CACHE_DEFAULT_MB = 2048       # the kernels' own default (cuda/rana_cpu_buffers.h)
 MARGIN = 0.04                        # of the ceiling: allocator slack, Python objects, progress bars
+# A frame's tiles are first sized with the heap's kept memory counted as in use (resident_bytes(give_back=False)):
+# giving it back means faulting it in again as the frame's tensors reuse it. Only when that sizing would compute
+# more than GIVE_BACK_WORTH times the work of the sizing with the kept memory given back (estimated from
+# heap.kept_bytes), or fit nothing, is it given back and the frame sized again. Measured on bench/shot.py's 5-frame
+# 960x540 shot (runs/generalization-s39): giving back at every frame start returned 2-3.5 GB each time, and
+# faulting it in again took 3.9-4.0 M page faults and 16 s of system time with the cross-frame default; without it
+# 1.05 M and 6 s, the shot 57.3 / 59.2 -> 54.3 / 55.6 s (two alternating rounds) in 18 tiles instead of 10 (1.14x
+# the frame's bins computed instead of 1.07x: four frames sized smaller, at most 1.25x the work) and a lower peak
+# (4.3-4.4 against 4.7-4.9 GB); with the single-frame default 40.9 / 41.6 -> 38.3 / 38.7 s, the same tiles.
+GIVE_BACK_WORTH = 1.5
 
 
-def resident_bytes() -> int:
+def resident_bytes(give_back: bool = True) -> int:
     """This process's resident set now (Linux /proc; 0 where it cannot be read), after the heap has given back
-    the free memory it keeps for reuse (heap.py), so the figure is what the process uses."""
-    heap.give_back()
+    the free memory it keeps for reuse (heap.py), so the figure is what the process uses. `give_back=False`: as it
+    is, the kept memory counted as in use (an upper bound, and no pages to fault in again; see GIVE_BACK_WORTH)."""
+    if give_back:
+        heap.give_back()
     return heap.resident_now()
 
 
@@ -80,16 +92,20 @@ def fmt(n: float) -> str:
     return f"{n / 2**20:.0f} MB" if n >= 10 * 2**20 else f"{n / 2**20:.1f} MB"
 
 
-def tile_budget(max_memory: float, images: list, centre: int) -> tuple[float, float]:
-    """(bytes the tiles may use, bytes everything else takes) under the ceiling `max_memory` for this frame."""
-    other = resident_bytes() + frame_working_bytes(images, centre) + kernel_cache_bytes() + MARGIN * max_memory
+def tile_budget(max_memory: float, images: list, centre: int, resident: float | None = None) -> tuple[float, float]:
+    """(bytes the tiles may use, bytes everything else takes) under the ceiling `max_memory` for this frame;
+    `resident`: the process's resident set to count (None: resident_bytes())."""
+    resident = resident_bytes() if resident is None else resident
+    other = resident + frame_working_bytes(images, centre) + kernel_cache_bytes() + MARGIN * max_memory
     return max_memory - other, other
 
 
-def prior_need(max_memory: float, images: list, centre: int) -> float:
-    """Bytes the frame's inputs and flat prior need at their peak, the process's resident set included; more than
-    `max_memory` means the frame cannot be prepared within the ceiling, whatever the tiles."""
-    return resident_bytes() + prior_peak_bytes(images, centre) + kernel_cache_bytes() + MARGIN * max_memory
+def prior_need(max_memory: float, images: list, centre: int, resident: float | None = None) -> float:
+    """Bytes the frame's inputs and flat prior need at their peak, the process's resident set included (`resident`,
+    None: resident_bytes()); more than `max_memory` means the frame cannot be prepared within the ceiling, whatever
+    the tiles."""
+    resident = resident_bytes() if resident is None else resident
+    return resident + prior_peak_bytes(images, centre) + kernel_cache_bytes() + MARGIN * max_memory
 
 
 def device_free_bytes(device) -> float:

@@ -22,7 +22,7 @@ from . import cache as cache_io
 from . import heap
 from .channels import REQUIRED, detect, motion_candidates
 from .denoise import (ALIGN, CPU_TILE_BINS, choose_tile, denoise_window, halo_for, is_cross_frame, model_features,
-                      tile_bytes)
+                      tile_bytes, tiling_work)
 from .deep import all_finite, nonfinite_bins
 from .errors import RanadError
 from .profile import stage
@@ -197,13 +197,29 @@ def choose_frame_tile(images, centre, halo: int, max_memory: float, where: str,
     """The tile (choose_tile) that keeps this frame's denoising under the ceiling `max_memory` (memory.py) and, for
     a model on a GPU, inside `device_free` bytes of GPU memory (memory.device_free_bytes); a RanadError when even
     the smallest tile does not fit, or (`prior`: a model on the flat prior) when making the frame's prior would
-    not."""
+    not. The heap's kept memory is given back only when sizing the tiles with it counted as in use costs more than
+    memory.GIVE_BACK_WORTH times the work (or fits nothing)."""
     from . import memory
 
     img = images[centre]
-    prior_need = memory.prior_need(max_memory, images, centre) if prior else 0.0
-    budget, other = memory.tile_budget(max_memory, images, centre)
-    tile = choose_tile(img.offsets, img.width, img.height, halo, min(budget, device_free), len(images), max_bins)
+
+    def plan(resident: float) -> tuple:
+        need = memory.prior_need(max_memory, images, centre, resident) if prior else 0.0
+        budget, other = memory.tile_budget(max_memory, images, centre, resident)
+        tile = choose_tile(img.offsets, img.width, img.height, halo, min(budget, device_free), len(images), max_bins)
+        return tile, budget, other, need
+
+    def work(tile: int) -> int:
+        return tiling_work(img.offsets, img.width, img.height, tile, halo)
+
+    resident, kept = memory.resident_bytes(give_back=False), heap.kept_bytes()
+    # the sizing the give-back would allow (its estimate) first, the one without it last, so that the tile used is
+    # the last one chosen
+    hoped = plan(resident - kept)[0] if kept else None
+    tile, budget, other, prior_need = plan(resident)
+    if kept is None or tile == ALIGN or prior_need > max_memory or (
+            kept and work(tile) > memory.GIVE_BACK_WORTH * work(hoped)):
+        tile, budget, other, prior_need = plan(memory.resident_bytes())
     if tile == ALIGN or prior_need > max_memory:
         need = tile_bytes(img.offsets, img.width, img.height, ALIGN, halo, len(images))
         if need > budget or prior_need > max_memory:

@@ -297,3 +297,62 @@ def test_write_columns_is_the_column_by_column_write():
     write_columns(got, chans, ["A"], one)
     want[:, 3] = one
     np.testing.assert_array_equal(got, want)
+
+
+@pytest.mark.parametrize("kept_gb,worth_it", [(0.0, False), (0.3, False), (2.5, True)])
+def test_kept_memory_goes_back_before_sizing_only_when_the_tiles_would_pay_for_it(monkeypatch, kept_gb, worth_it):
+    """shot.choose_frame_tile sizes a frame's tiles with the heap's kept memory counted as in use; it gives that
+    memory back (to be faulted in again) and sizes again only when the tiles it allowed would compute more than
+    memory.GIVE_BACK_WORTH times the work the give-back would allow. The process's memory is stood in for: 0.2 GB
+    in use plus kept_gb kept, a 3 GB ceiling, nothing else counted; the tile used is checked against the choice
+    made by hand from the budget each case leaves."""
+    from ranad_core import heap, memory, shot
+    from ranad_core.deep import DeepImage
+    from ranad_core.denoise import choose_tile, tile_bytes, tiling_work
+
+    rng = np.random.default_rng(3)
+    counts = rng.integers(1, 4, size=(1080, 1920))
+    offsets = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
+    img = DeepImage(values=np.zeros((int(offsets[-1]), 1), np.float32), offsets=offsets, channels=["R"],
+                    data_window=(0, 0, 1919, 1079))
+    gb, in_use, kept = 2**30, 0.2 * 2**30, kept_gb * 2**30
+    gave_back = []
+
+    def resident(give_back=True):
+        if give_back:
+            gave_back.append(True)
+        return in_use if give_back or gave_back else in_use + kept
+
+    monkeypatch.setattr(memory, "resident_bytes", resident)
+    monkeypatch.setattr(heap, "kept_bytes", lambda: kept)
+    monkeypatch.setattr(memory, "frame_working_bytes", lambda images, centre: 0.0)
+    monkeypatch.setattr(memory, "kernel_cache_bytes", lambda: 0.0)
+    ceiling, halo = 3 * gb, 16
+    tile = shot.choose_frame_tile([img], 0, halo, ceiling, "f.exr")
+
+    def by_hand(resident_bytes):
+        return choose_tile(offsets, 1920, 1080, halo, ceiling * (1 - memory.MARGIN) - resident_bytes)
+
+    kept_tile, given_tile = by_hand(in_use + kept), by_hand(in_use)
+    work = lambda t: tiling_work(offsets, 1920, 1080, t, halo)  # noqa: E731
+    assert (work(kept_tile) > memory.GIVE_BACK_WORTH * work(given_tile)) == worth_it   # the cases are what they say
+    assert bool(gave_back) == worth_it
+    assert tile == (given_tile if worth_it else kept_tile)
+    counted = in_use if worth_it else in_use + kept
+    assert tile_bytes(offsets, 1920, 1080, tile, halo) <= ceiling * (1 - memory.MARGIN) - counted
+
+
+def test_kept_bytes_counts_what_the_heap_keeps():
+    """heap.kept_bytes (mallinfo2) sees freed memory the heap keeps under the policy; None without the policy."""
+    import subprocess
+    import sys
+
+    code = ("import numpy as np; from ranad_core import heap; print(heap.kept_bytes()); heap.keep_freed_memory(); "
+            "k0 = heap.kept_bytes(); a = np.ones(64 << 20, np.uint8); del a; print(k0, heap.kept_bytes())")
+    if not sys.platform.startswith("linux"):
+        pytest.skip("glibc's allocator: Linux only")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.split()
+    if out[1] == "None":
+        pytest.skip("the C library is not glibc 2.33 or later: no mallinfo2")
+    assert out[0] == "None"
+    assert int(out[2]) - int(out[1]) >= 60 << 20

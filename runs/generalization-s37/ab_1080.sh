@@ -5,6 +5,8 @@
 # bench/denoise.py --frame tiles to 1080p (written by `python bench/denoise.py --frame F` or tile_to). Prints wall
 # seconds and peak resident MB per run; the flat OIDN command and its environment are bench/denoise.py's (read,
 # flatten, OIDN; numpy without huge pages, BLAS on one thread, as the ranad command sets for itself).
+# `python -P`: without it, `python -m` puts the working directory ahead of PYTHONPATH, so a run from a checkout
+# measured that checkout twice (session 39).
 set -eu
 old=$1; new=$2; frame=$3; rounds=${4:-3}
 out=$(mktemp -d)
@@ -13,11 +15,11 @@ img = read_deep(sys.argv[1]); flat = np.ascontiguousarray(metrics.flat_rgb(img),
 pyoidn.denoise(np.maximum(flat, 0), hdr=True)"
 for r in $(seq "$rounds"); do
   for tree in "$old" "$new"; do
-    /usr/bin/time -f "$tree %e s %M KB" env PYTHONPATH="$tree" python -m ranad_cli denoise "$frame" \
+    /usr/bin/time -f "$tree %e s %M KB" env PYTHONPATH="$tree" python -P -m ranad_cli denoise "$frame" \
       -o "$out/o.exr" --threads 2 >/dev/null 2>"$out/err" || { cat "$out/err"; exit 1; }
     tail -1 "$out/err"
   done
   /usr/bin/time -f "flat-oidn %e s %M KB" env PYTHONPATH="$new" NUMPY_MADVISE_HUGEPAGE=0 OPENBLAS_NUM_THREADS=1 \
-    OMP_NUM_THREADS=2 python -c "$oidn" "$frame" 2>&1 | tail -1
+    OMP_NUM_THREADS=2 python -P -c "$oidn" "$frame" 2>&1 | tail -1
 done
 rm -rf "$out"
