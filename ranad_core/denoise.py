@@ -354,6 +354,9 @@ def _denoise_window(model, images, centre, mapping, tile, halo, keep_noisy, want
             for i, im in enumerate(images):
                 if priors[i] is None:
                     priors[i] = FramePrior.of(im, mapping)
+                    # the prior's freed scratch before the next frame's (prior_need counts one frame's at a time: a
+                    # 2-frame 1080p window at --max-memory 4G peaked at 4.05 GiB here, runs/generalization-s39)
+                    heap.relieve()
         carried = list(priors)
         sources = [p.attached(im) for p, im in zip(carried, images)]
     else:
@@ -367,6 +370,9 @@ def _denoise_window(model, images, centre, mapping, tile, halo, keep_noisy, want
         # thin bins are merged in every frame of the window (a thin neighbour left as it is costs the cross-frame
         # model: runs/bin-merge-s15)
         frames = [_model_frame(m, mapping, features, p, merge_gap) for m, p in zip(moved, carried)]
+    # the window's copies with the prior's channels and the compensated neighbours (every channel of the files) are
+    # not read again: held through the tiles they were 1.5 GB of a 2-frame 1080p window (runs/generalization-s39)
+    del sources, moved
     heap.relieve()   # the prior's freed scratch, where the resident set nears the memory ceiling
     c = frames[centre]
     n = c.srt.num_bins

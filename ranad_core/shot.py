@@ -193,18 +193,20 @@ def first_frame(path: str, opts: "ShotOptions"):
 
 
 def choose_frame_tile(images, centre, halo: int, max_memory: float, where: str,
-                      device_free: float = float("inf"), prior: bool = False, max_bins: int | None = None) -> int:
+                      device_free: float = float("inf"), prior: bool = False, max_bins: int | None = None,
+                      prior_frames: list | None = None) -> int:
     """The tile (choose_tile) that keeps this frame's denoising under the ceiling `max_memory` (memory.py) and, for
     a model on a GPU, inside `device_free` bytes of GPU memory (memory.device_free_bytes); a RanadError when even
     the smallest tile does not fit, or (`prior`: a model on the flat prior) when making the frame's prior would
-    not. The heap's kept memory is given back only when sizing the tiles with it counted as in use costs more than
+    not (`prior_frames`: the frames whose prior is still to be made, None: `images`). The heap's kept memory is given back only when sizing the tiles with it counted as in use costs more than
     memory.GIVE_BACK_WORTH times the work (or fits nothing)."""
     from . import memory
 
     img = images[centre]
 
     def plan(resident: float) -> tuple:
-        need = memory.prior_need(max_memory, images, centre, resident) if prior else 0.0
+        need = memory.prior_need(max_memory, images if prior_frames is None else prior_frames, centre,
+                                 resident) if prior else 0.0
         budget, other = memory.tile_budget(max_memory, images, centre, resident)
         tile = choose_tile(img.offsets, img.width, img.height, halo, min(budget, device_free), len(images), max_bins)
         return tile, budget, other, need
@@ -526,8 +528,12 @@ def _denoise_part(model, images, centre, flows, where, opts, summary, halo, tile
         from .memory import device_free_bytes
 
         device = next(model.parameters()).device
+        # a cross-frame window makes only the flat priors not carried from an earlier window (denoise_window)
+        pending = [im for im, p in zip(images, priors)
+                   if p is None] if priors is not None and len(images) > 1 and is_cross_frame(model) else images
         tile = choose_frame_tile(images, centre, halo, opts.max_memory, where, device_free_bytes(device),
-                                 model_features(model) == "prior", CPU_TILE_BINS if device.type == "cpu" else None)
+                                 model_features(model) == "prior" and bool(pending),
+                                 CPU_TILE_BINS if device.type == "cpu" else None, pending)
     ntiles = sum(1 for _ in range(0, img.height, tile)) * sum(1 for _ in range(0, img.width, tile))
     if tile_bar is not None and hasattr(tile_bar, "reset"):
         tile_bar.reset(ntiles)

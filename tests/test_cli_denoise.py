@@ -220,6 +220,31 @@ def test_max_memory_covers_the_flat_prior(tmp_path, monkeypatch):
     assert r.exit_code == 0, r.output
 
 
+def test_a_cross_frame_window_counts_only_the_flat_priors_it_still_makes(tmp_path, monkeypatch):
+    """A cross-frame model on the flat prior makes each frame's prior once per shot and carries it to the later
+    windows (denoise_window), so a window's memory check counts the prior's peak (memory.prior_peak_bytes) of the
+    frames whose prior is still to be made only: window (0, 1) both, (0, 1, 2) frame 2's, (1, 2) none. Before, every
+    window counted all of its frames again, and a 3-frame 1080p shot at --max-memory 4G was refused at frame 1 for
+    priors it already held. The bundled 3-frame shot with the shipped cross-frame default."""
+    from ranad_core import memory
+    from ranad_core.model.store import DEFAULT_CROSS_MODEL
+
+    asked = []
+    real = memory.prior_peak_bytes
+
+    def spy(images, centre):
+        asked.append(tuple(im.num_bins for im in images))
+        return real(images, centre)
+
+    monkeypatch.setattr(memory, "prior_peak_bytes", spy)
+    r = run("denoise", SHOT / "noisy_spp16.####.exr", "-o", tmp_path / "d.####.exr", "--model", DEFAULT_CROSS_MODEL)
+    assert r.exit_code == 0, r.output
+    bins = [read_deep(SHOT / f"noisy_spp16.{n:04d}.exr").num_bins for n in range(3)]
+    assert len(set(bins)) == 3   # the frames tell apart by their bins
+    windows = [a for i, a in enumerate(asked) if i == 0 or a != asked[i - 1]]   # a window may size its tiles twice
+    assert windows == [(bins[0], bins[1]), (bins[2],)]
+
+
 def test_gpu_free_memory_bounds_the_tiles(tmp_path, model_file, monkeypatch):
     """A model on a GPU gets tiles sized to the GPU's free memory as well as to --max-memory: the smaller budget
     reaches the tile choice, and a GPU too full for one minimal tile is a one-line error with no output. The GPU's

@@ -433,3 +433,36 @@ def test_default_pair_shares_its_spatial_weights():
     inner["embed.0.weight"] = w[:, :n]
     differ = [k for k, v in single.items() if not torch.equal(v, inner[k])]
     assert not differ, f"{DEFAULT_CROSS_MODEL} was not trained on {DEFAULT_MODEL}: {differ[:3]}"
+
+
+def test_the_windows_copies_are_freed_before_its_tiles(monkeypatch):
+    """denoise_window's copies of a window's frames with the flat prior's channels attached, and the neighbours
+    compensated onto the centre (every channel of the files, 1.5 GB of a 2-frame 1080p window), are not read once
+    the model's frames are made: no array of theirs may still be alive when the tiles run (held through them, a
+    2-frame 1080p window at --max-memory 4G went over the ceiling)."""
+    import weakref
+
+    from ranad_core import denoise as denoise_mod
+    from ranad_core import motion
+    from ranad_core.model.store import DEFAULT_CROSS_MODEL, load_model
+
+    copies = []
+    compensate = motion.compensate
+
+    def spy_compensate(sources, centre, **kwargs):
+        moved, dropped = compensate(sources, centre, **kwargs)
+        copies.extend(weakref.ref(im.values) for im in (*sources, *moved))
+        return moved, dropped
+
+    alive = []
+    tile_inputs = denoise_mod._tile_inputs
+
+    def spy_tile_inputs(fr, win, width):
+        alive.append(sum(ref() is not None for ref in copies))
+        return tile_inputs(fr, win, width)
+
+    monkeypatch.setattr(motion, "compensate", spy_compensate)
+    monkeypatch.setattr(denoise_mod, "_tile_inputs", spy_tile_inputs)
+    frames = [read_deep(SHOT / f"noisy_spp16.{i:04d}.exr") for i in range(3)]
+    denoise_window(load_model(DEFAULT_CROSS_MODEL).model, frames, 1)
+    assert len(copies) == 6 and alive and max(alive) == 0
