@@ -198,8 +198,9 @@ def choose_frame_tile(images, centre, halo: int, max_memory: float, where: str,
     """The tile (choose_tile) that keeps this frame's denoising under the ceiling `max_memory` (memory.py) and, for
     a model on a GPU, inside `device_free` bytes of GPU memory (memory.device_free_bytes); a RanadError when even
     the smallest tile does not fit, or (`prior`: a model on the flat prior) when making the frame's prior would
-    not (`prior_frames`: the frames whose prior is still to be made, None: `images`). The heap's kept memory is given back only when sizing the tiles with it counted as in use costs more than
-    memory.GIVE_BACK_WORTH times the work (or fits nothing)."""
+    not (`prior_frames`: the frames whose prior is still to be made, None: `images`). The heap's kept memory is
+    given back only when sizing the tiles with it counted as in use costs more than memory.GIVE_BACK_WORTH times
+    the work (or fits nothing)."""
     from . import memory
 
     img = images[centre]
